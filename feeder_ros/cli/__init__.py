@@ -1,0 +1,1 @@
+"""The ``feeder`` command: one sub-command per module here, each thin over the library."""

@@ -1,0 +1,73 @@
+"""Entry point of the ``feeder`` command.
+
+Each sub-command lives in its own module of :mod:`feeder_ros.cli` and exposes
+
+* ``HELP``: a one-line summary shown by ``feeder --help``;
+* ``add_arguments(parser)``: declares its options on an :class:`argparse.ArgumentParser`;
+* ``run(args) -> int``: does the work (through library modules) and returns the exit status.
+
+Errors the user can fix (bad parameters, unreadable files) are raised as :class:`CommandError`
+(or :class:`ValueError` subclasses such as ``ParameterError``) and printed as one line, exit 2.
+"""
+
+from __future__ import annotations
+
+import argparse
+import importlib
+import sys
+from collections.abc import Sequence
+from typing import Protocol, cast
+
+__all__ = ["SUBCOMMANDS", "CommandError", "main"]
+
+# name -> module (imported lazily so that ``feeder --help`` stays fast)
+SUBCOMMANDS: dict[str, str] = {
+    "sim": "feeder_ros.cli.sim",
+}
+
+
+class CommandError(Exception):
+    """A failure the user can act on; printed without a traceback."""
+
+
+class _Subcommand(Protocol):
+    HELP: str
+
+    def add_arguments(self, parser: argparse.ArgumentParser) -> None: ...
+
+    def run(self, args: argparse.Namespace) -> int: ...
+
+
+def _load(name: str) -> _Subcommand:
+    return cast(_Subcommand, importlib.import_module(SUBCOMMANDS[name]))
+
+
+def build_parser() -> argparse.ArgumentParser:
+    parser = argparse.ArgumentParser(
+        prog="feeder",
+        description="Vibratory inline feeder tools: simulate, run a cell, record and analyse bags.",
+    )
+    sub = parser.add_subparsers(dest="command", metavar="COMMAND", required=True)
+    for name in SUBCOMMANDS:
+        module = _load(name)
+        child = sub.add_parser(name, help=module.HELP, description=module.HELP)
+        module.add_arguments(child)
+        child.set_defaults(_run=module.run)
+    return parser
+
+
+def main(argv: Sequence[str] | None = None) -> int:
+    parser = build_parser()
+    args = parser.parse_args(argv)
+    try:
+        return int(args._run(args))
+    except KeyboardInterrupt:
+        print("feeder: interrupted", file=sys.stderr)
+        return 130
+    except (CommandError, ValueError, OSError) as error:
+        print(f"feeder {args.command}: error: {error}", file=sys.stderr)
+        return 2
+
+
+if __name__ == "__main__":
+    sys.exit(main())

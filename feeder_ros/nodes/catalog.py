@@ -1,0 +1,14 @@
+"""The node modules this package installs as executables (kept equal to setup.py by a test)."""
+
+from __future__ import annotations
+
+import importlib
+
+from feeder_ros.node_interfaces import NodeInterface
+
+NODE_MODULES: tuple[str, ...] = ("feeder_ros.nodes.manual_drive",)
+
+
+def node_interfaces() -> list[NodeInterface]:
+    """Each node module's declared interface, importing the modules (needs rclpy)."""
+    return [importlib.import_module(name).INTERFACE for name in NODE_MODULES]

@@ -1,0 +1,106 @@
+"""Helpers for tests that start real ROS 2 processes and watch the graph over DDS."""
+
+from __future__ import annotations
+
+import ast
+import os
+import subprocess
+import sys
+import time
+from collections.abc import Callable, Iterator, Sequence
+from contextlib import contextmanager
+from pathlib import Path
+from typing import Any
+
+import rclpy
+from rclpy.context import Context
+from rclpy.executors import SingleThreadedExecutor
+from rclpy.node import Node
+
+REPO = Path(__file__).resolve().parents[1]
+
+
+def console_scripts() -> dict[str, str]:
+    """setup.py's console_scripts as {executable: "module:function"} (the installed executables)."""
+    tree = ast.parse((REPO / "setup.py").read_text(encoding="utf-8"))
+    for node in ast.walk(tree):
+        if isinstance(node, ast.Assign) and any(
+            isinstance(t, ast.Name) and t.id == "CONSOLE_SCRIPTS" for t in node.targets
+        ):
+            entries = ast.literal_eval(node.value)
+            return dict(tuple(part.strip() for part in entry.split("=")) for entry in entries)
+    raise AssertionError("setup.py has no CONSOLE_SCRIPTS list")
+
+
+def node_executables() -> list[str]:
+    """Executables whose entry point is a node (a module under feeder_ros.nodes)."""
+    return sorted(
+        exe for exe, target in console_scripts().items() if target.startswith("feeder_ros.nodes.")
+    )
+
+
+def sourced_environment(setup_script: Path) -> dict[str, str]:
+    """The environment after `source setup_script` in bash (what a ROS user's shell has)."""
+    output = subprocess.run(
+        ["bash", "-c", f"source '{setup_script}' && env -0"],
+        check=True,
+        capture_output=True,
+        env=dict(os.environ),
+    ).stdout
+    pairs = (item.split("=", 1) for item in output.decode().split("\0") if "=" in item)
+    return dict(pairs)
+
+
+def wait_until(predicate: Callable[[], bool], timeout_s: float, spin: Callable[[], None]) -> bool:
+    deadline = time.monotonic() + timeout_s
+    while time.monotonic() < deadline:
+        if predicate():
+            return True
+        spin()
+    return predicate()
+
+
+@contextmanager
+def probe_node(name: str = "feeder_test_probe") -> Iterator[tuple[Node, SingleThreadedExecutor]]:
+    """An rclpy node in its own context, for watching the graph and exchanging messages."""
+    context = Context()
+    rclpy.init(context=context)
+    node = rclpy.create_node(name, context=context)
+    executor = SingleThreadedExecutor(context=context)
+    executor.add_node(node)
+    try:
+        yield node, executor
+    finally:
+        executor.shutdown()
+        node.destroy_node()
+        rclpy.shutdown(context=context)
+
+
+@contextmanager
+def running(
+    command: Sequence[str], env: dict[str, str] | None = None, **kwargs: Any
+) -> Iterator[subprocess.Popen[str]]:
+    """Start a process; on exit interrupt it (Ctrl-C) and insist it ended cleanly."""
+    process = subprocess.Popen(
+        list(command),
+        env=env,
+        stdout=subprocess.PIPE,
+        stderr=subprocess.STDOUT,
+        text=True,
+        **kwargs,
+    )
+    try:
+        yield process
+    finally:
+        if process.poll() is None:
+            process.send_signal(2)  # SIGINT, as Ctrl-C
+            try:
+                process.wait(timeout=10)
+            except subprocess.TimeoutExpired:
+                process.kill()
+                process.wait()
+                raise AssertionError(f"{command[0]} did not stop on Ctrl-C within 10 s") from None
+
+
+def python_command(*args: str) -> list[str]:
+    return [sys.executable, *args]
