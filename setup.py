@@ -15,6 +15,7 @@ PACKAGE = "feeder_ros"
 CONSOLE_SCRIPTS = [
     "feeder = feeder_ros.cli.main:main",
     "manual_drive = feeder_ros.nodes.manual_drive:main",
+    "platform_simulator = feeder_ros.nodes.platform_simulator:main",
 ]
 
 setup(

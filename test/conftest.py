@@ -7,6 +7,7 @@ Every process the tests start inherits both, so parallel runs never see each oth
 
 from __future__ import annotations
 
+import atexit
 import fcntl
 import os
 import random
@@ -39,6 +40,7 @@ def _claim_domain_id() -> int:
             handle.close()
             continue
         _domain_lock = handle  # held (and the id reserved) until this process exits
+        atexit.register(handle.close)
         return domain_id
     raise RuntimeError(f"all ROS domain ids {_DOMAIN_IDS[0]}..{_DOMAIN_IDS[-1]} are in use")
 

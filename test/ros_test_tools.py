@@ -6,6 +6,7 @@ import ast
 import os
 import subprocess
 import sys
+import threading
 import time
 from collections.abc import Callable, Iterator, Sequence
 from contextlib import contextmanager
@@ -14,7 +15,7 @@ from typing import Any
 
 import rclpy
 from rclpy.context import Context
-from rclpy.executors import SingleThreadedExecutor
+from rclpy.executors import MultiThreadedExecutor
 from rclpy.node import Node
 
 REPO = Path(__file__).resolve().parents[1]
@@ -51,29 +52,49 @@ def sourced_environment(setup_script: Path) -> dict[str, str]:
     return dict(pairs)
 
 
-def wait_until(predicate: Callable[[], bool], timeout_s: float, spin: Callable[[], None]) -> bool:
+def wait_until(predicate: Callable[[], bool], timeout_s: float) -> bool:
+    """Poll ``predicate`` (callbacks run in the probe's spinning thread) until true or timeout."""
     deadline = time.monotonic() + timeout_s
     while time.monotonic() < deadline:
         if predicate():
             return True
-        spin()
+        time.sleep(0.02)
     return predicate()
 
 
 @contextmanager
-def probe_node(name: str = "feeder_test_probe") -> Iterator[tuple[Node, SingleThreadedExecutor]]:
-    """An rclpy node in its own context, for watching the graph and exchanging messages."""
+def probe_node(name: str = "feeder_test_probe") -> Iterator[Node]:
+    """An rclpy node in its own context, spun by a background thread (subscriptions fill lists
+    while the test thread waits or makes service calls with :func:`call`)."""
     context = Context()
     rclpy.init(context=context)
     node = rclpy.create_node(name, context=context)
-    executor = SingleThreadedExecutor(context=context)
+    executor = MultiThreadedExecutor(num_threads=2, context=context)
     executor.add_node(node)
+    thread = threading.Thread(target=executor.spin, daemon=True)
+    thread.start()
     try:
-        yield node, executor
+        yield node
     finally:
         executor.shutdown()
+        thread.join(timeout=5)
         node.destroy_node()
         rclpy.shutdown(context=context)
+
+
+def call(node: Node, service_type: Any, name: str, request: Any, timeout_s: float = 10.0) -> Any:
+    """Call a service from the test thread (the probe's executor thread delivers the answer)."""
+    client = node.create_client(service_type, name)
+    try:
+        assert client.wait_for_service(timeout_sec=timeout_s), f"{name} not available"
+        future = client.call_async(request)
+        deadline = time.monotonic() + timeout_s
+        while not future.done() and time.monotonic() < deadline:
+            time.sleep(0.01)
+        assert future.done(), f"{name} did not answer within {timeout_s} s"
+        return future.result()
+    finally:
+        node.destroy_client(client)
 
 
 @contextmanager

@@ -17,6 +17,7 @@ from pathlib import Path
 import pytest
 from rcl_interfaces.srv import GetParameters
 from ros_test_tools import (
+    call,
     console_scripts,
     node_executables,
     probe_node,
@@ -124,30 +125,28 @@ def test_ros2_run_resolves_and_honours_ros_args(workspace: Path, executable: str
         "-r", f"{topic.name}:={remapped}",
         "-p", "use_sim_time:=true",
     ]  # fmt: skip
-    with running(command, env=env) as process, probe_node() as (probe, executor):
-
-        def spin() -> None:
-            executor.spin_once(timeout_sec=0.1)
+    with running(command, env=env) as process, probe_node() as probe:
 
         def node_visible() -> bool:
             return (node_name, namespace) in probe.get_node_names_and_namespaces()
 
-        assert wait_until(node_visible, 20.0, spin), process.stdout and process.poll()
+        assert wait_until(node_visible, 20.0), process.poll()
         topics = dict(probe.get_topic_names_and_types())
 
         def topic_visible() -> bool:
             topics.update(probe.get_topic_names_and_types())
             return f"{namespace}/{remapped}" in topics
 
-        assert wait_until(topic_visible, 10.0, spin), sorted(topics)
+        assert wait_until(topic_visible, 10.0), sorted(topics)
         assert topics[f"{namespace}/{remapped}"] == [topic.type]
         assert f"{namespace}/{topic.name}" not in topics  # remapped away
 
-        client = probe.create_client(GetParameters, f"{namespace}/{node_name}/get_parameters")
-        assert client.wait_for_service(timeout_sec=10.0)
-        future = client.call_async(GetParameters.Request(names=["use_sim_time"]))
-        executor.spin_until_future_complete(future, timeout_sec=10.0)
-        assert future.result() is not None
-        assert future.result().values[0].bool_value is True
+        answer = call(
+            probe,
+            GetParameters,
+            f"{namespace}/{node_name}/get_parameters",
+            GetParameters.Request(names=["use_sim_time"]),
+        )
+        assert answer.values[0].bool_value is True
         assert process.poll() is None, "node exited early"
     assert process.returncode == 0, process.stdout.read() if process.stdout else ""

@@ -5,6 +5,8 @@ from __future__ import annotations
 import math
 
 import pytest
+from rclpy.serialization import deserialize_message, serialize_message
+
 from feeder_ros.msg import (
     CarrierState,
     DriveCommand,
@@ -17,7 +19,6 @@ from feeder_ros.msg import (
     VehicleEstimate,
 )
 from feeder_ros.srv import SetDrive, SetTargetSpeed, SpawnParts
-from rclpy.serialization import deserialize_message, serialize_message
 
 
 def test_measurements_carry_a_header_stamp() -> None:

@@ -6,7 +6,10 @@ import importlib
 
 from feeder_ros.node_interfaces import NodeInterface
 
-NODE_MODULES: tuple[str, ...] = ("feeder_ros.nodes.manual_drive",)
+NODE_MODULES: tuple[str, ...] = (
+    "feeder_ros.nodes.manual_drive",
+    "feeder_ros.nodes.platform_simulator",
+)
 
 
 def node_interfaces() -> list[NodeInterface]:

@@ -7,7 +7,7 @@ from collections.abc import Callable, Sequence
 
 import rclpy
 from rclpy.exceptions import ParameterException
-from rclpy.executors import ExternalShutdownException, MultiThreadedExecutor
+from rclpy.executors import ExternalShutdownException, SingleThreadedExecutor
 from rclpy.node import Node
 
 from feeder_ros.physics.parameters import ParameterError
@@ -28,7 +28,7 @@ def run_node(make_node: Callable[[], Node], args: Sequence[str] | None = None) -
             except (ParameterError, ParameterException, ValueError) as error:
                 rclpy.logging.get_logger("feeder_ros").error(f"refusing to start: {error}")
                 return 2
-            executor = MultiThreadedExecutor(num_threads=2)
+            executor = SingleThreadedExecutor()
             executor.add_node(node)
             try:
                 executor.spin()

@@ -35,7 +35,7 @@ class ParameterSpec:
     minimum: float | None = None
     maximum: float | None = None
     exclusive_minimum: bool = False
-    choices: tuple[str, ...] = ()
+    choices: tuple[str, ...] = ()  # for str: the allowed values; empty: any string
     read_only: bool = False  # fixed for the life of a running simulator node
 
     def check(self, value: object) -> float | int | bool | str:
@@ -45,6 +45,8 @@ class ParameterSpec:
                 raise ParameterError(f"{self.name}={value!r} is not true or false")
             return value
         if self.kind is str:
+            if isinstance(value, str) and not self.choices:
+                return value
             if not isinstance(value, str) or value not in self.choices:
                 raise ParameterError(
                     f"{self.name}={value!r} is not one of {', '.join(self.choices)}"

@@ -1,0 +1,68 @@
+"""ROS-free core for recording and reading rosbag2 bags in MCAP format.
+
+Write: ``BagWriter`` (bag directory with metadata.yaml version 9 and chunked, compressed, split MCAP
+files; crash safe chunk by chunk). Read: ``Bag`` / ``bag_info`` / ``read_columns`` (vectorised CDR
+decoding into numpy column batches, streamed chunk by chunk) / ``iter_messages`` (generic).
+Repair: ``reindex`` (metadata.yaml from the data; cut-short files finished with summary and footer).
+"""
+
+from feeder_ros.bag.cdr import ColumnPlan, decode_cdr
+from feeder_ros.bag.errors import (
+    BagError,
+    BagProblem,
+    BagWarning,
+    CorruptRecordError,
+    MessageDefinitionError,
+    MissingBagError,
+    UnknownTypeError,
+    UnsupportedLayoutError,
+    WriterStateError,
+)
+from feeder_ros.bag.reader import (
+    LOG_TIME,
+    PUBLISH_TIME,
+    Bag,
+    BagInfo,
+    ColumnBatch,
+    RawMessage,
+    TopicInfo,
+    bag_info,
+    concat_batches,
+    iter_messages,
+    read_columns,
+    read_tables,
+)
+from feeder_ros.bag.reindex import reindex
+from feeder_ros.bag.schemas import ros2msg_schema, type_description_hash
+from feeder_ros.bag.writer import BagWriter, default_qos_yaml
+
+__all__ = [
+    "LOG_TIME",
+    "PUBLISH_TIME",
+    "Bag",
+    "BagError",
+    "BagInfo",
+    "BagProblem",
+    "BagWarning",
+    "BagWriter",
+    "ColumnBatch",
+    "ColumnPlan",
+    "CorruptRecordError",
+    "MessageDefinitionError",
+    "MissingBagError",
+    "RawMessage",
+    "TopicInfo",
+    "UnknownTypeError",
+    "UnsupportedLayoutError",
+    "WriterStateError",
+    "bag_info",
+    "concat_batches",
+    "decode_cdr",
+    "default_qos_yaml",
+    "iter_messages",
+    "read_columns",
+    "read_tables",
+    "reindex",
+    "ros2msg_schema",
+    "type_description_hash",
+]

@@ -1,0 +1,411 @@
+"""``feeder sim``: simulate the feeder offline and write CSV, events and figures.
+
+Parameters come from the simulator's YAML file (``config/platform_simulator.yaml``, ROS
+``ros__parameters`` form), then ``--set name=value`` overrides (validated by
+:func:`~feeder_ros.physics.parameters.parse_parameter_value`). Samples are written at exact
+multiples of ``1/--rate``. Output files are written to a temporary file beside the target and
+renamed, so a failed or interrupted run never leaves a half-written file.
+"""
+
+from __future__ import annotations
+
+import argparse
+import contextlib
+import csv
+import io
+import math
+import os
+import sys
+import tempfile
+import time
+from collections.abc import Iterator, Mapping, Sequence
+from pathlib import Path
+from typing import TYPE_CHECKING, Any, TextIO
+
+import numpy as np
+import yaml
+
+from feeder_ros.cli.main import CommandError
+from feeder_ros.nodes.platform_simulator_parameters import NODE_PARAMETERS
+from feeder_ros.physics.parameters import FeederParameters, ParameterError, parse_parameter_value
+
+if TYPE_CHECKING:
+    from feeder_ros.physics.simulation import PartSpec, SimulationResult
+
+__all__ = [
+    "CONFIG_NAME",
+    "HELP",
+    "NODE_NAME",
+    "NON_MODEL_KEYS",
+    "add_arguments",
+    "default_config_path",
+    "load_parameters",
+    "run",
+]
+
+HELP = "simulate the feeder offline (exact event-driven engine) and write CSV/events/figures"
+NODE_NAME = "platform_simulator"
+CONFIG_NAME = "platform_simulator.yaml"
+# ROS parameters of the simulator node that are not model parameters: accepted in the YAML, ignored.
+NON_MODEL_KEYS: frozenset[str] = frozenset(NODE_PARAMETERS)
+_PACKAGE = "feeder_ros"
+
+
+def default_config_path() -> Path:
+    """The simulator YAML: the source tree's ``config/`` when run from a checkout, else the
+    installed share directory (ament index, then ``<prefix>/share/feeder_ros/config``)."""
+    source = Path(__file__).resolve().parents[2] / "config" / CONFIG_NAME
+    if source.is_file():
+        return source
+    candidates: list[Path] = []
+    try:
+        from ament_index_python.packages import get_package_share_directory
+
+        candidates.append(Path(get_package_share_directory(_PACKAGE)) / "config" / CONFIG_NAME)
+    except Exception:
+        pass
+    candidates.append(Path(sys.prefix) / "share" / _PACKAGE / "config" / CONFIG_NAME)
+    for candidate in candidates:
+        if candidate.is_file():
+            return candidate
+    raise CommandError(
+        f"cannot find {CONFIG_NAME} (looked in {source.parent} and the installed share "
+        "directory); pass --config FILE"
+    )
+
+
+def load_parameters(
+    path: Path, overrides: Sequence[str] = (), preset: str | None = None
+) -> FeederParameters:
+    """Model parameters from a ROS parameter YAML file plus ``name=value`` overrides.
+
+    ``preset`` picks the section ``platform_simulator_<preset>`` (e.g. ``realistic``) instead of
+    ``platform_simulator``.
+    """
+    node_name = NODE_NAME if preset is None else f"{NODE_NAME}_{preset}"
+    try:
+        document = yaml.safe_load(path.read_text(encoding="utf-8"))
+    except yaml.YAMLError as error:
+        raise CommandError(f"{path}: not valid YAML: {error}") from None
+    section: Any = None
+    if isinstance(document, Mapping):
+        keys = (node_name, f"/{node_name}") if preset else (node_name, f"/{node_name}", "/**")
+        for key in keys:
+            if key in document:
+                section = document[key]
+                break
+    if not isinstance(section, Mapping) or not isinstance(section.get("ros__parameters"), Mapping):
+        presets = sorted(
+            str(key)[len(NODE_NAME) + 1 :]
+            for key in (document if isinstance(document, Mapping) else {})
+            if str(key).startswith(f"{NODE_NAME}_")
+        )
+        known = f" (presets in this file: {', '.join(presets) or 'none'})" if preset else ""
+        raise CommandError(
+            f"{path}: expected '{node_name}: ros__parameters: {{name: value}}'{known}"
+        )
+    values = {k: v for k, v in section["ros__parameters"].items() if k not in NON_MODEL_KEYS}
+    try:
+        params = FeederParameters.from_mapping(values)
+    except ParameterError as error:
+        raise CommandError(f"{path}: {error}") from None
+    changes: dict[str, float | int | str] = {}
+    for item in overrides:
+        name, sep, text = item.partition("=")
+        if not sep or not name.strip():
+            raise CommandError(f"--set {item!r}: expected name=value")
+        changes[name.strip()] = parse_parameter_value(name.strip(), text.strip())
+    return params.with_changes(**changes) if changes else params
+
+
+def _positive_float(text: str) -> float:
+    try:
+        value = float(text)
+    except ValueError:
+        raise argparse.ArgumentTypeError(f"{text!r} is not a number") from None
+    if not (value > 0.0 and math.isfinite(value)):
+        raise argparse.ArgumentTypeError(f"{text!r} must be positive and finite")
+    return value
+
+
+def _part_count(text: str) -> int:
+    try:
+        value = int(text)
+    except ValueError:
+        raise argparse.ArgumentTypeError(f"{text!r} is not an integer") from None
+    if value < 0:
+        raise argparse.ArgumentTypeError(f"{text!r} must be >= 0")
+    return value
+
+
+def add_arguments(parser: argparse.ArgumentParser) -> None:
+    parser.add_argument("--config", type=Path, help=f"simulator YAML (default: {CONFIG_NAME})")
+    parser.add_argument(
+        "--preset",
+        help="use the YAML's platform_simulator_<PRESET> section, e.g. 'realistic' (damped)",
+    )
+    parser.add_argument(
+        "--set",
+        dest="overrides",
+        action="append",
+        default=[],
+        metavar="NAME=VALUE",
+        help="override one model parameter (repeatable), e.g. --set drive_amplitude_n=40",
+    )
+    parser.add_argument(
+        "--duration", type=_positive_float, default=1.0, help="simulated time in s (default 1)"
+    )
+    parser.add_argument(
+        "--rate",
+        type=_positive_float,
+        default=1000.0,
+        help="output samples per second; samples at exact multiples of 1/rate (default 1000)",
+    )
+    parser.add_argument(
+        "--parts", type=_part_count, default=1, help="number of parts on the track (default 1)"
+    )
+    parser.add_argument("--output", type=Path, help="write the samples to this CSV file")
+    parser.add_argument("--events", type=Path, help="write the events (t_s,kind,part) to this CSV")
+    parser.add_argument("--plot", type=Path, metavar="DIR", help="write the figures (PNG) here")
+    parser.add_argument(
+        "--progress", action="store_true", help="show a progress bar even if stderr is not a TTY"
+    )
+
+
+@contextlib.contextmanager
+def atomic_text(path: Path) -> Iterator[TextIO]:
+    """A text file that appears at ``path`` only if the block completes (temp file + rename)."""
+    path = Path(path)
+    directory = path.parent if str(path.parent) else Path(".")
+    if not directory.is_dir():
+        raise CommandError(f"{path}: directory {directory} does not exist")
+    fd, temp = tempfile.mkstemp(prefix=f".{path.name}.", suffix=".tmp", dir=directory)
+    try:
+        with os.fdopen(fd, "w", encoding="utf-8", newline="") as stream:
+            yield stream
+        umask = os.umask(0)
+        os.umask(umask)
+        os.chmod(temp, 0o666 & ~umask)  # mkstemp creates 0600; give the file the usual mode
+        os.replace(temp, path)
+    except BaseException:
+        with contextlib.suppress(OSError):
+            os.unlink(temp)
+        raise
+
+
+def samples_header(n_parts: int) -> list[str]:
+    header = ["t_s", "carrier_x_m", "carrier_v_mps", "carrier_a_mps2", "branch"]
+    for i in range(n_parts):
+        header += [f"part{i}_x_m", f"part{i}_v_mps", f"part{i}_phase"]
+    return header
+
+
+def write_samples(stream: TextIO, result: SimulationResult) -> None:
+    n_parts = int(result.part_x_m.shape[1]) if result.part_x_m.ndim == 2 else 0
+    writer = csv.writer(stream, lineterminator="\n")
+    writer.writerow(samples_header(n_parts))
+    rows = len(result.t_s)
+    chunk = 20000
+    for start in range(0, rows, chunk):
+        stop = min(start + chunk, rows)
+        buffer = io.StringIO()
+        for k in range(start, stop):
+            row = [
+                repr(float(result.t_s[k])),
+                repr(float(result.carrier_x_m[k])),
+                repr(float(result.carrier_v_mps[k])),
+                repr(float(result.carrier_a_mps2[k])),
+                str(int(result.branch[k])),
+            ]
+            for i in range(n_parts):
+                row += [
+                    repr(float(result.part_x_m[k, i])),
+                    repr(float(result.part_v_mps[k, i])),
+                    str(int(result.part_phase[k, i])),
+                ]
+            buffer.write(",".join(row) + "\n")
+        stream.write(buffer.getvalue())
+
+
+def write_events(stream: TextIO, result: SimulationResult) -> None:
+    from feeder_ros.physics.simulation import EventKind
+
+    writer = csv.writer(stream, lineterminator="\n")
+    writer.writerow(["t_s", "kind", "part"])
+    for t, kind, part in zip(result.event_t_s, result.event_kind, result.event_part, strict=True):
+        writer.writerow([repr(float(t)), EventKind(int(kind)).name, int(part)])
+
+
+def default_parts(params: FeederParameters, count: int) -> tuple[PartSpec, ...]:
+    """``count`` parts of the configured kind, spread over the first half of the track."""
+    from feeder_ros.physics.simulation import PartSpec
+
+    spacing = 0.5 * params.track_length_m / max(count, 1)
+    return tuple(PartSpec(position_m=i * spacing) for i in range(count))
+
+
+class _Progress:
+    """A one-line progress bar on stderr."""
+
+    def __init__(self, total: float, enabled: bool) -> None:
+        self.total = total
+        self.enabled = enabled
+        self._last = -1
+
+    def update(self, done: float) -> None:
+        if not self.enabled:
+            return
+        percent = int(100.0 * min(done / self.total, 1.0)) if self.total > 0 else 100
+        if percent == self._last:
+            return
+        self._last = percent
+        bar = "#" * (percent // 4)
+        sys.stderr.write(f"\rsimulating [{bar:<25}] {percent:3d}%")
+        sys.stderr.flush()
+
+    def close(self) -> None:
+        if self.enabled and self._last >= 0:
+            sys.stderr.write("\n")
+            sys.stderr.flush()
+
+
+def simulate_with_progress(
+    params: FeederParameters,
+    duration_s: float,
+    rate_hz: float,
+    parts: tuple[PartSpec, ...],
+    progress: _Progress,
+) -> SimulationResult:
+    """``simulate``, in chunks of the exact simulator when a progress bar is shown.
+
+    Chunked advancing gives exactly the same trajectory as one run (``FeederSimulator``).
+    """
+    from feeder_ros.physics.simulation import FeederSimulator, simulate
+
+    if not progress.enabled or params.stiffness_model != "sharp":
+        progress.update(0.0)
+        result = simulate(params, duration_s, rate_hz, parts=parts)
+        progress.update(duration_s)
+        return result
+    n = math.floor(duration_s * rate_hz * (1.0 + 1e-12))
+    samples = np.arange(n + 1, dtype=np.float64) / rate_hz
+    simulator = FeederSimulator(params, parts)
+    chunks: list[SimulationResult] = []
+    pieces = 50
+    for k in range(1, pieces + 1):
+        t_end = duration_s * k / pieces if k < pieces else duration_s
+        lo = int(np.searchsorted(samples, simulator.time_s, side="left"))
+        hi = int(np.searchsorted(samples, t_end, side="left" if k < pieces else "right"))
+        chunks.append(simulator.advance(t_end, samples[lo:hi]))
+        progress.update(t_end)
+    return _concatenate(chunks)
+
+
+def _concatenate(chunks: Sequence[SimulationResult]) -> SimulationResult:
+    """One result from consecutive ``FeederSimulator.advance`` chunks (totals from the last)."""
+    from dataclasses import replace
+
+    last = chunks[-1]
+    return replace(
+        last,
+        **{
+            name: np.concatenate([getattr(chunk, name) for chunk in chunks])
+            for name in (
+                "t_s",
+                "carrier_x_m",
+                "carrier_v_mps",
+                "carrier_a_mps2",
+                "branch",
+                "part_x_m",
+                "part_v_mps",
+                "part_phase",
+                "event_t_s",
+                "event_kind",
+                "event_part",
+            )
+        },
+    )
+
+
+def run(args: argparse.Namespace) -> int:
+    config = args.config if args.config is not None else default_config_path()
+    if not Path(config).is_file():
+        raise CommandError(f"--config {config}: no such file")
+    params = load_parameters(Path(config), args.overrides, args.preset)
+    parts = default_parts(params, args.parts)
+    show = bool(args.progress) or (sys.stderr.isatty() and args.duration >= 10.0)
+    progress = _Progress(args.duration, show)
+    warmup = _warm_up(params)
+    started = time.perf_counter()
+    try:
+        result = simulate_with_progress(params, args.duration, args.rate, parts, progress)
+    finally:
+        progress.close()
+    wall = time.perf_counter() - started
+
+    if args.output is not None:
+        with atomic_text(args.output) as stream:
+            write_samples(stream, result)
+    if args.events is not None:
+        with atomic_text(args.events) as stream:
+            write_events(stream, result)
+    figures: list[Path] = []
+    if args.plot is not None:
+        from feeder_ros.physics.case_study import DETAIL_WINDOW_S, detail_run, plot_result
+
+        detail = detail_run(
+            params, parts or default_parts(params, 1), min(DETAIL_WINDOW_S, args.duration)
+        )
+        figures = plot_result(result, params, Path(args.plot), detail=detail)
+
+    print(summary(params, result, args.duration, wall, figures, warmup))
+    return 0
+
+
+def _warm_up(params: FeederParameters) -> float:
+    """Compile (or load from numba's cache) the exact engine's kernels before timing the run."""
+    if params.stiffness_model != "sharp":
+        return 0.0
+    from feeder_ros.physics.simulation import simulate
+
+    started = time.perf_counter()
+    simulate(params, 1e-3, 1e3, parts=())
+    return time.perf_counter() - started
+
+
+def summary(
+    params: FeederParameters,
+    result: SimulationResult,
+    duration_s: float,
+    wall_s: float,
+    figures: Sequence[Path] = (),
+    warmup_s: float = 0.0,
+) -> str:
+    from feeder_ros.physics.case_study import case_study_facts_from_result
+
+    facts = case_study_facts_from_result(params, result)
+    n_parts = int(result.part_x_m.shape[1]) if result.part_x_m.ndim == 2 else 0
+    lines = [
+        f"simulated {duration_s:g} s ({params.stiffness_model} model, "
+        f"{params.stiffness_switch} switch, A = {params.drive_amplitude_n:g} N, "
+        f"f_d = {params.drive_frequency_hz:g} Hz, c = {params.damping_ns_per_m:g} N*s/m)",
+        f"natural frequencies: forward {facts.forward_natural_frequency_hz:.2f} Hz, "
+        f"backward {facts.backward_natural_frequency_hz:.2f} Hz",
+    ]
+    if n_parts:
+        speed = float(np.nanmean(result.mean_part_speed_mps()))
+        slip = float(np.nanmean(result.slip_fraction()))
+        onset = facts.first_slip_onset_s
+        lines += [
+            f"parts: {n_parts} ({result.exited_count()} left the track), mean part speed "
+            f"{speed * 1e3:.4g} mm/s, slip fraction {slip:.3f}, "
+            + (f"part 0 first slips at {onset * 1e3:.3f} ms" if onset is not None else "no slip"),
+        ]
+    lines += [
+        f"events: {len(result.event_t_s)}",
+        f"simulation wall time {wall_s:.3f} s, real-time factor "
+        f"{duration_s / wall_s if wall_s > 0 else math.inf:.1f}x"
+        + (f" (after {warmup_s:.1f} s compiling the solver)" if warmup_s >= 0.5 else ""),
+    ]
+    lines += [f"figure: {path}" for path in figures]
+    return "\n".join(lines)

@@ -1,0 +1,562 @@
+"""``platform_simulator``: the feeder's carrier and parts, simulated live by the exact physics core.
+
+Driven by ``drive/command``; publishes what a real feeder's sensors would (the carrier accelerometer
+as ``sensor_msgs/Imu``, part-present sensor edges, parts leaving the track) and the ground truth
+(carrier state, every part's state). All the physics is :class:`FeederSimulator`; this node turns
+parameters and messages into calls on it and samples into messages.
+
+Timing: samples lie on exact grids ``k / rate`` of simulated time; each tick advances the simulation
+to the tick's target time and publishes every sample up to it, so none is skipped or duplicated.
+By default simulated time follows the wall clock (times ``real_time_factor``); with
+``use_sim_time`` the node publishes ``/clock`` itself and can run as fast as the machine allows
+(``real_time_factor`` = 0).
+"""
+
+from __future__ import annotations
+
+import math
+import threading
+from typing import Any
+
+import numpy as np
+from builtin_interfaces.msg import Time as TimeMsg
+from diagnostic_msgs.msg import DiagnosticArray, DiagnosticStatus, KeyValue
+from rclpy.clock import Clock
+from rclpy.clock_type import ClockType
+from rclpy.node import Node
+from rclpy.parameter import Parameter
+from rclpy.qos import (
+    HistoryPolicy,
+    QoSProfile,
+    ReliabilityPolicy,
+    qos_profile_sensor_data,
+)
+from rclpy.time import Time
+from rosgraph_msgs.msg import Clock as ClockMessage
+from sensor_msgs.msg import Imu
+from std_srvs.srv import Trigger
+
+from feeder_ros.msg import (
+    AccelerometerBatch,
+    CarrierState,
+    CarrierStateBatch,
+    DriveCommand,
+    PartExit,
+    PartSensorEvent,
+    PartState,
+    PartStateArray,
+)
+from feeder_ros.node_interfaces import NodeInterface, ServiceSpec, TopicSpec
+from feeder_ros.nodes.platform_simulator_parameters import NODE_DEFAULTS, NODE_PARAMETERS
+from feeder_ros.nodes.ros_parameters import declare_parameters, validator
+from feeder_ros.nodes.runner import run_node
+from feeder_ros.physics.parameters import PARAMETER_SPECS, FeederParameters
+from feeder_ros.physics.simulation import EventKind, FeederSimulator, PartSpec, Phase
+from feeder_ros.sensors.accelerometer import AccelerometerModel
+from feeder_ros.sensors.part_presence import PartSensorArray
+from feeder_ros.srv import SpawnParts
+
+PHYSICS_DEFAULTS = FeederParameters().as_dict()
+PARAMETERS = {**PARAMETER_SPECS, **NODE_PARAMETERS}
+
+SENSOR_QOS = qos_profile_sensor_data  # best effort, keep last 5
+# ground truth and events: reliable, with a second of history at 1 kHz for slow readers
+STATE_QOS = QoSProfile(
+    depth=1000, history=HistoryPolicy.KEEP_LAST, reliability=ReliabilityPolicy.RELIABLE
+)
+COMMAND_QOS = QoSProfile(depth=10, reliability=ReliabilityPolicy.RELIABLE)
+
+INTERFACE = NodeInterface(
+    executable="platform_simulator",
+    node_name="platform_simulator",
+    summary="simulates the carrier and its parts (exact stick-slip physics) under drive commands",
+    subscribes=(
+        TopicSpec(
+            "drive/command",
+            "feeder_ros/msg/DriveCommand",
+            "reliable, depth 10",
+            "drive force; applied at its stamp, a stale one is a stop",
+        ),
+    ),
+    publishes=(
+        TopicSpec(
+            "imu", "sensor_msgs/msg/Imu", "sensor data", "carrier accelerometer, x along track"
+        ),
+        TopicSpec(
+            "imu/batch",
+            "feeder_ros/msg/AccelerometerBatch",
+            "sensor data",
+            "the same samples in batches (publish_batches)",
+        ),
+        TopicSpec(
+            "carrier/state",
+            "feeder_ros/msg/CarrierState",
+            "reliable, depth 1000",
+            "carrier displacement, velocity, acceleration, stiffness branch, drive (ground truth)",
+        ),
+        TopicSpec(
+            "carrier/state_batch",
+            "feeder_ros/msg/CarrierStateBatch",
+            "reliable, depth 1000",
+            "the same samples in batches (publish_batches)",
+        ),
+        TopicSpec(
+            "parts/state",
+            "feeder_ros/msg/PartStateArray",
+            "reliable, depth 1000",
+            "every part's position, velocity and phase (ground truth)",
+        ),
+        TopicSpec(
+            "parts/sensor_events",
+            "feeder_ros/msg/PartSensorEvent",
+            "reliable, depth 1000",
+            "part-present sensor edges at sensor_positions_m",
+        ),
+        TopicSpec(
+            "parts/exit",
+            "feeder_ros/msg/PartExit",
+            "reliable, depth 1000",
+            "a part left the end of the track (feed count)",
+        ),
+        TopicSpec("/clock", "rosgraph_msgs/msg/Clock", "reliable", "simulated time (use_sim_time)"),
+        TopicSpec(
+            "/diagnostics",
+            "diagnostic_msgs/msg/DiagnosticArray",
+            "reliable, depth 10",
+            "simulation health at 1 Hz: achieved real-time factor, lag, samples, parts",
+        ),
+    ),
+    services=(
+        ServiceSpec("~/reset", "std_srvs/srv/Trigger", "back to t = 0 with the initial parts"),
+        ServiceSpec("~/spawn_parts", "feeder_ros/srv/SpawnParts", "put parts on the track"),
+    ),
+    parameters=PARAMETERS,
+)
+
+
+def parse_positions(text: str) -> list[float]:
+    """Sensor positions from "0.1, 0.185"; refuses NaN, negatives and garbage with the value."""
+    positions: list[float] = []
+    for item in text.split(","):
+        item = item.strip()
+        if not item:
+            continue
+        try:
+            value = float(item)
+        except ValueError:
+            raise ValueError(f"sensor_positions_m: {item!r} is not a number") from None
+        if not math.isfinite(value) or value < 0.0:
+            raise ValueError(f"sensor_positions_m: {item!r} must be a finite position >= 0")
+        positions.append(value)
+    return sorted(positions)
+
+
+def _check_combination(values: dict[str, Any]) -> None:
+    FeederParameters.from_mapping({k: values[k] for k in PARAMETER_SPECS})
+    parse_positions(values["sensor_positions_m"])
+    if values["real_time_factor"] == 0.0 and not values.get("use_sim_time", False):
+        raise ValueError("real_time_factor=0 (unpaced) needs use_sim_time=true")
+
+
+class PlatformSimulator(Node):
+    def __init__(self) -> None:
+        super().__init__(INTERFACE.node_name)
+        self._values = declare_parameters(
+            self, PARAMETERS.values(), {**PHYSICS_DEFAULTS, **NODE_DEFAULTS}
+        )
+        self._values["use_sim_time"] = self.get_parameter("use_sim_time").value
+        _check_combination(self._values)
+        self.add_on_set_parameters_callback(
+            validator(PARAMETERS, check_all=_check_combination, current=self._current_values)
+        )
+        self.add_post_set_parameters_callback(self._apply_parameters)
+
+        self._lock = threading.Lock()
+        self._sim_clock = bool(self._values["use_sim_time"])
+        self._wall = Clock(clock_type=ClockType.STEADY_TIME)
+
+        pub = self.create_publisher
+        self._batches = bool(self._values["publish_batches"])
+        if self._batches:
+            self._imu_pub = pub(AccelerometerBatch, "imu/batch", SENSOR_QOS)
+            self._state_pub = pub(CarrierStateBatch, "carrier/state_batch", STATE_QOS)
+        else:
+            self._imu_pub = pub(Imu, "imu", SENSOR_QOS)
+            self._state_pub = pub(CarrierState, "carrier/state", STATE_QOS)
+        self._parts_pub = pub(PartStateArray, "parts/state", STATE_QOS)
+        self._sensor_pub = pub(PartSensorEvent, "parts/sensor_events", STATE_QOS)
+        self._exit_pub = pub(PartExit, "parts/exit", STATE_QOS)
+        self._clock_pub = pub(ClockMessage, "/clock", 10) if self._sim_clock else None
+        self.create_subscription(DriveCommand, "drive/command", self._on_command, COMMAND_QOS)
+        self.create_service(Trigger, "~/reset", self._on_reset)
+        self.create_service(SpawnParts, "~/spawn_parts", self._on_spawn)
+
+        self._start()
+        self._timer = self.create_timer(self._values["tick_period_s"], self._tick, clock=self._wall)
+        self._diagnostics_pub = pub(DiagnosticArray, "/diagnostics", 10)
+        self._report = (self._wall.now().nanoseconds * 1e-9, self._sim.time_s)
+        self.create_timer(1.0, self._publish_diagnostics, clock=self._wall)
+        self.get_logger().info(
+            f"simulating f_n = {self._sim.params.forward_natural_frequency_hz:.2f} / "
+            f"{self._sim.params.backward_natural_frequency_hz:.2f} Hz, "
+            f"{self._sim.part_count} parts, "
+            + ("sim time (/clock)" if self._sim_clock else "wall-clock paced")
+        )
+
+    # -- parameters --------------------------------------------------------------------------
+    def _current_values(self) -> dict[str, Any]:
+        return dict(self._values)
+
+    def _physics(self) -> FeederParameters:
+        return FeederParameters.from_mapping({k: self._values[k] for k in PARAMETER_SPECS})
+
+    def _apply_parameters(self, parameters: list[Parameter[Any]]) -> None:
+        changed = {p.name for p in parameters if p.name in PARAMETERS}
+        with self._lock:
+            for parameter in parameters:
+                if parameter.name in PARAMETERS:
+                    self._values[parameter.name] = parameter.value
+            if changed & set(PARAMETER_SPECS):
+                self._sim.set_parameters(self._physics())
+            if changed & {"imu_noise_density_mps2_per_sqrt_hz", "imu_bias_mps2"} | {
+                "imu_saturation_mps2",
+                "imu_seed",
+            }:
+                self._accelerometer = self._make_accelerometer()
+            if "real_time_factor" in changed:
+                self._rebase_pacing()
+
+    # -- simulation state ----------------------------------------------------------------------
+    def _make_accelerometer(self) -> AccelerometerModel:
+        return AccelerometerModel(
+            rate_hz=self._values["imu_rate_hz"],
+            noise_density=self._values["imu_noise_density_mps2_per_sqrt_hz"],
+            bias=self._values["imu_bias_mps2"],
+            saturation=self._values["imu_saturation_mps2"],
+            gravity=self._values["gravity_mps2"],
+            seed=self._values["imu_seed"],
+        )
+
+    def _start(self) -> None:
+        """(Re)start the simulation at t = 0 with the initial parts and no drive."""
+        physics = self._physics().with_changes(drive_amplitude_n=0.0)
+        count = self._values["initial_parts"]
+        start, spacing = self._values["part_start_m"], self._values["part_spacing_m"]
+        parts = [PartSpec(position_m=start + i * spacing) for i in range(count)]
+        self._sim = FeederSimulator(physics, parts)
+        self._sim.advance(0.0)  # compiles (or loads the cached) solver before the node serves
+        self._accelerometer = self._make_accelerometer()
+        self._sensors = PartSensorArray(
+            parse_positions(self._values["sensor_positions_m"]), self._values["part_length_m"]
+        )
+        self._imu_index = 1  # sample k at k / rate; k = 0 is the state at rest, not published
+        self._state_index = 1
+        self._parts_index = 1
+        self._parts_out = 0
+        self._last_feed_s = 0.0
+        self._epoch_ns = 0 if self._sim_clock else self.get_clock().now().nanoseconds
+        self._command_deadline_s = math.inf
+        self._drive = (physics.drive_frequency_hz, 0.0)
+        self._rebase_pacing()
+
+    def _rebase_pacing(self) -> None:
+        self._pace_wall_s = self._wall.now().nanoseconds * 1e-9
+        self._pace_sim_s = self._sim.time_s
+
+    def _stamp(self, t_s: float) -> TimeMsg:
+        sec, nanosec = divmod(self._epoch_ns + round(t_s * 1e9), 1_000_000_000)
+        return TimeMsg(sec=sec, nanosec=nanosec)
+
+    def _sim_time_of(self, stamp: Any) -> float:
+        return (Time.from_msg(stamp).nanoseconds - self._epoch_ns) * 1e-9
+
+    # -- inputs --------------------------------------------------------------------------------
+    def _on_command(self, message: DriveCommand) -> None:
+        values = (message.frequency_hz, message.amplitude_n, message.ramp_time_s)
+        if message.enabled and not (
+            all(math.isfinite(v) for v in values)
+            and message.frequency_hz > 0.0
+            and message.amplitude_n >= 0.0
+            and message.ramp_time_s >= 0.0
+        ):
+            self.get_logger().warn(
+                f"ignoring malformed drive command: frequency_hz={message.frequency_hz!r}, "
+                f"amplitude_n={message.amplitude_n!r}, ramp_time_s={message.ramp_time_s!r}"
+            )
+            return
+        with self._lock:
+            now = self._sim.time_s
+            at = self._sim_time_of(message.header.stamp)
+            timeout = self._values["command_timeout_s"]
+            if message.header.stamp.sec == 0 and message.header.stamp.nanosec == 0:
+                at = now  # unstamped: at once
+            if timeout > 0.0 and at < now - timeout:
+                self.get_logger().warn(
+                    f"drive command stamped {now - at:.3f} s ago (> command_timeout_s="
+                    f"{timeout}): treated as stop",
+                    throttle_duration_sec=5.0,
+                )
+                self._stop_drive(now)
+                return
+            at = max(at, now)
+            frequency = message.frequency_hz if message.enabled else self._drive[0]
+            amplitude = message.amplitude_n if message.enabled else 0.0
+            if (frequency, amplitude) != self._drive or at > now:
+                # a repeated command only refreshes the deadline: the schedule stays short
+                self._sim.set_drive(frequency, amplitude, at_time_s=at, ramp_s=message.ramp_time_s)
+                self._drive = (frequency, amplitude)
+            self._command_deadline_s = at + timeout if timeout > 0.0 else math.inf
+
+    def _stop_drive(self, at_s: float) -> None:
+        if self._drive[1] != 0.0:
+            self._sim.set_drive(self._drive[0], 0.0, at_time_s=at_s)
+            self._drive = (self._drive[0], 0.0)
+        self._command_deadline_s = math.inf
+
+    def _on_reset(self, request: Trigger.Request, response: Trigger.Response) -> Any:
+        with self._lock:
+            self._start()
+        response.success = True
+        response.message = f"reset to t = 0 with {self._sim.part_count} parts"
+        return response
+
+    def _on_spawn(self, request: SpawnParts.Request, response: SpawnParts.Response) -> Any:
+        problems = []
+        if request.count < 1 or request.count > 10000:
+            problems.append(f"count={request.count} must be in 1..10000")
+        for name in ("position_m", "spacing_m"):
+            value = getattr(request, name)
+            if not math.isfinite(value) or value < 0.0:
+                problems.append(f"{name}={value!r} must be a finite value >= 0")
+        if not problems and (
+            request.position_m + (request.count - 1) * request.spacing_m
+            >= self._values["track_length_m"]
+        ):
+            problems.append(
+                f"parts from {request.position_m} m spaced {request.spacing_m} m do not fit on "
+                f"the track (track_length_m={self._values['track_length_m']})"
+            )
+        if problems:
+            response.success = False
+            response.message = "; ".join(problems)
+            return response
+        with self._lock:
+            ids = [
+                self._sim.spawn_part(
+                    PartSpec(position_m=request.position_m + i * request.spacing_m)
+                )
+                for i in range(request.count)
+            ]
+        response.success = True
+        response.part_ids = ids
+        response.message = f"spawned {len(ids)} parts"
+        return response
+
+    # -- the loop ------------------------------------------------------------------------------
+    def _target_time(self) -> float:
+        factor = float(self._values["real_time_factor"])
+        step = float(self._values["max_step_s"])
+        if factor == 0.0:
+            return self._sim.time_s + step
+        elapsed = self._wall.now().nanoseconds * 1e-9 - self._pace_wall_s
+        target = self._pace_sim_s + elapsed * factor
+        # never run ahead by more than max_step_s in one tick (after a stall, catch up in steps)
+        return min(target, self._sim.time_s + step)
+
+    def _tick(self) -> None:
+        with self._lock:
+            target = self._target_time()
+            if target <= self._sim.time_s:
+                return
+            if target > self._command_deadline_s:
+                self._advance(self._command_deadline_s)
+                self._stop_drive(self._sim.time_s)
+            self._feed(target)
+            self._advance(target)
+        if self._clock_pub is not None:
+            self._clock_pub.publish(ClockMessage(clock=self._stamp(target)))
+
+    def _publish_diagnostics(self) -> None:
+        with self._lock:
+            wall_now = self._wall.now().nanoseconds * 1e-9
+            sim_now = self._sim.time_s
+            wall_then, sim_then = self._report
+            self._report = (wall_now, sim_now)
+            factor = self._values["real_time_factor"]
+            lag = 0.0
+            if factor > 0.0:
+                lag = self._pace_sim_s + (wall_now - self._pace_wall_s) * factor - sim_now
+            on_track = self._sim.part_count - self._parts_out
+            values = {
+                "simulated_time_s": f"{sim_now:.6f}",
+                "achieved_real_time_factor": f"{(sim_now - sim_then) / (wall_now - wall_then):.3f}",
+                "requested_real_time_factor": f"{factor:g}",
+                "lag_behind_schedule_s": f"{lag:.4f}",
+                "imu_samples_published": str(self._imu_index - 1),
+                "state_samples_published": str(self._state_index - 1),
+                "parts_on_track": str(on_track),
+                "parts_out_total": str(self._parts_out),
+                "drive_frequency_hz": f"{self._drive[0]:g}",
+                "drive_amplitude_n": f"{self._drive[1]:g}",
+            }
+        status = DiagnosticStatus(
+            name=f"{self.get_fully_qualified_name()}: simulation",
+            hardware_id="simulated feeder",
+            level=DiagnosticStatus.OK if lag < 0.1 else DiagnosticStatus.WARN,
+            message="running" if lag < 0.1 else f"{lag:.2f} s behind the wall clock",
+            values=[KeyValue(key=k, value=v) for k, v in values.items()],
+        )
+        array = DiagnosticArray(status=[status])
+        array.header.stamp = self._stamp(sim_now)
+        self._diagnostics_pub.publish(array)
+
+    def _feed(self, target: float) -> None:
+        interval = self._values["feed_interval_s"]
+        if interval <= 0.0:
+            return
+        while self._last_feed_s + interval <= target:
+            self._last_feed_s += interval
+            self._advance(self._last_feed_s)
+            self._sim.spawn_part(PartSpec(position_m=self._values["part_start_m"]))
+
+    def _grid(self, index: int, rate: float, t_end: float) -> tuple[np.ndarray, int]:
+        last = math.floor(t_end * rate + 1e-9)
+        if last < index:
+            return np.zeros(0), index
+        return np.arange(index, last + 1) / rate, last + 1
+
+    def _advance(self, t_end: float) -> None:
+        if t_end <= self._sim.time_s:
+            return
+        imu_t, self._imu_index = self._grid(self._imu_index, self._values["imu_rate_hz"], t_end)
+        state_t, self._state_index = self._grid(
+            self._state_index, self._values["state_rate_hz"], t_end
+        )
+        parts_t, self._parts_index = self._grid(
+            self._parts_index, self._values["parts_rate_hz"], t_end
+        )
+        times = np.union1d(np.union1d(imu_t, state_t), parts_t)
+        if times.size:
+            t_end = max(t_end, float(times[-1]))  # k / rate may round just above t_end
+        segments = self._sim.drive.segments()
+        result = self._sim.advance(t_end, times)
+        if times.size == 0:
+            self._publish_exits(result)
+            return
+        accel = result.carrier_a_mps2
+        if imu_t.size:
+            rows = np.searchsorted(times, imu_t)
+            self._publish_imu(imu_t, self._accelerometer.measure(accel[rows]))
+        if state_t.size:
+            rows = np.searchsorted(times, state_t)
+            segment = np.clip(np.searchsorted(segments.start_s, state_t, "right") - 1, 0, None)
+            columns: dict[str, np.ndarray] = {
+                "displacement_m": result.carrier_x_m[rows],
+                "velocity_mps": result.carrier_v_mps[rows],
+                "acceleration_mps2": accel[rows],
+                "stiffness_branch": result.branch[rows],
+                "drive_frequency_hz": segments.omega_rad_s[segment] / (2.0 * math.pi),
+                "drive_amplitude_n": segments.amplitude_n[segment],
+                "drive_force_n": segments.force(state_t),
+            }
+            self._publish_states(state_t, columns)
+        track = result.part_x_m - result.carrier_x_m[:, None]
+        for edge in self._sensors.update(times, track):
+            event = PartSensorEvent()
+            event.header.stamp = self._stamp(edge.t_s)
+            event.sensor_index = edge.sensor_index
+            event.sensor_position_m = edge.position_m
+            event.part_id = edge.part
+            event.present = edge.present
+            self._sensor_pub.publish(event)
+        if parts_t.size:
+            rows = np.searchsorted(times, parts_t)
+            for j, row in enumerate(rows):
+                self._publish_parts(parts_t[j], result, row, track[row])
+        self._publish_exits(result)
+
+    def _publish_imu(self, t: np.ndarray, measured: np.ndarray) -> None:
+        frame = self._values["imu_frame_id"]
+        if self._batches:
+            batch = AccelerometerBatch()
+            batch.header.stamp = self._stamp(float(t[0]))
+            batch.header.frame_id = frame
+            batch.sample_period_s = 1.0 / self._values["imu_rate_hz"]
+            batch.acceleration_x_mps2 = measured[:, 0].tolist()
+            batch.acceleration_y_mps2 = measured[:, 1].tolist()
+            batch.acceleration_z_mps2 = measured[:, 2].tolist()
+            batch.noise_stddev_mps2 = self._accelerometer.sigma
+            self._imu_pub.publish(batch)
+            return
+        variance = self._accelerometer.sigma**2
+        message = Imu()  # reused: publish() serialises at once
+        message.header.frame_id = frame
+        message.orientation_covariance[0] = -1.0  # no orientation estimate
+        message.angular_velocity_covariance[0] = -1.0  # no gyroscope
+        for k in (0, 4, 8):
+            message.linear_acceleration_covariance[k] = variance
+        acceleration = message.linear_acceleration
+        for j, (x, y, z) in enumerate(measured.tolist()):
+            message.header.stamp = self._stamp(float(t[j]))
+            acceleration.x, acceleration.y, acceleration.z = x, y, z
+            self._imu_pub.publish(message)
+
+    def _publish_states(self, t: np.ndarray, columns: dict[str, np.ndarray]) -> None:
+        if self._batches:
+            batch = CarrierStateBatch()
+            batch.header.stamp = self._stamp(float(t[0]))
+            batch.header.frame_id = "carrier"
+            batch.sample_period_s = 1.0 / self._values["state_rate_hz"]
+            for name, values in columns.items():
+                setattr(batch, name, values.tolist())
+            self._state_pub.publish(batch)
+            return
+        message = CarrierState()  # reused: publish() serialises at once
+        message.header.frame_id = "carrier"
+        rows = zip(*(values.tolist() for values in columns.values()), strict=True)
+        names = list(columns)
+        for j, row in enumerate(rows):
+            message.header.stamp = self._stamp(float(t[j]))
+            for name, value in zip(names, row, strict=True):
+                setattr(message, name, value)
+            self._state_pub.publish(message)
+
+    def _publish_parts(self, t: float, result: Any, row: int, track: np.ndarray) -> None:
+        message = PartStateArray()
+        message.header.stamp = self._stamp(t)
+        message.header.frame_id = "track"
+        carrier_v = float(result.carrier_v_mps[row])
+        for i in range(result.part_x_m.shape[1]):
+            phase = int(result.part_phase[row, i])
+            part = PartState()
+            part.part_id = i
+            part.on_track = phase != Phase.EXITED
+            if part.on_track:
+                part.position_m = float(track[i])
+                part.velocity_mps = float(result.part_v_mps[row, i])
+                part.relative_velocity_mps = part.velocity_mps - carrier_v
+                part.phase = phase
+            else:
+                part.position_m = math.nan
+                part.velocity_mps = math.nan
+                part.relative_velocity_mps = math.nan
+            message.parts.append(part)
+        self._parts_pub.publish(message)
+
+    def _publish_exits(self, result: Any) -> None:
+        exits = result.event_kind == EventKind.PART_EXIT
+        for t, part in zip(result.event_t_s[exits], result.event_part[exits], strict=True):
+            self._parts_out += 1
+            message = PartExit()
+            message.header.stamp = self._stamp(float(t))
+            message.part_id = int(part)
+            message.parts_out_total = self._parts_out
+            self._exit_pub.publish(message)
+
+
+def main(args: list[str] | None = None) -> int:
+    return run_node(PlatformSimulator, args)
+
+
+if __name__ == "__main__":
+    raise SystemExit(main())

@@ -1,0 +1,120 @@
+"""Parameters of the platform simulator node besides the model's (ROS-free, shared with the CLI).
+
+The model parameters are :data:`feeder_ros.physics.parameters.PARAMETER_SPECS`; these are the
+node's own: sample rates, pacing, the sensors it simulates and the parts it puts on the track.
+"""
+
+from __future__ import annotations
+
+from typing import Any
+
+from feeder_ros.physics.parameters import ParameterSpec
+
+NODE_PARAMETERS: dict[str, ParameterSpec] = {
+    spec.name: spec
+    for spec in (
+        ParameterSpec(
+            "imu_rate_hz", float, "Hz", "accelerometer sample rate", 1.0, 20000.0, read_only=True
+        ),
+        ParameterSpec(
+            "state_rate_hz", float, "Hz", "carrier state sample rate", 1.0, 20000.0, read_only=True
+        ),
+        ParameterSpec(
+            "parts_rate_hz", float, "Hz", "part states publish rate", 0.1, 1000.0, read_only=True
+        ),
+        ParameterSpec(
+            "publish_batches",
+            bool,
+            "",
+            "publish IMU and carrier state as batches (imu/batch, carrier/state_batch), one per "
+            "step, instead of one message per sample: for high rates and faster than real time",
+            read_only=True,
+        ),
+        ParameterSpec(
+            "tick_period_s",
+            float,
+            "s",
+            "wall time between simulation steps",
+            0.001,
+            1.0,
+            read_only=True,
+        ),
+        ParameterSpec(
+            "real_time_factor",
+            float,
+            "1",
+            "simulated seconds per wall second; 0: as fast as possible (needs use_sim_time)",
+            minimum=0.0,
+            maximum=1000.0,
+        ),
+        ParameterSpec(
+            "max_step_s", float, "s", "simulated time per tick when unpaced", 0.001, 10.0
+        ),
+        ParameterSpec(
+            "command_timeout_s",
+            float,
+            "s",
+            "a drive command older than this is a stop; 0 disables",
+            minimum=0.0,
+        ),
+        ParameterSpec("initial_parts", int, "1", "parts on the track at start", 0, 10000),
+        ParameterSpec("part_start_m", float, "m", "track position of new parts", minimum=0.0),
+        ParameterSpec(
+            "part_spacing_m", float, "m", "distance between parts put down together", 0.0
+        ),
+        ParameterSpec(
+            "feed_interval_s",
+            float,
+            "s",
+            "put a new part at part_start_m this often (a bowl feeding the track); 0: off",
+            minimum=0.0,
+        ),
+        ParameterSpec("part_length_m", float, "m", "part length seen by the sensors", 0.0, 1.0),
+        ParameterSpec(
+            "sensor_positions_m",
+            str,
+            "m",
+            "comma-separated track positions of part-present sensors",
+            read_only=True,
+        ),
+        ParameterSpec(
+            "imu_noise_density_mps2_per_sqrt_hz",
+            float,
+            "m/s^2/sqrt(Hz)",
+            "accelerometer white-noise density",
+            minimum=0.0,
+        ),
+        ParameterSpec("imu_bias_mps2", float, "m/s^2", "accelerometer bias along the track"),
+        ParameterSpec(
+            "imu_saturation_mps2",
+            float,
+            "m/s^2",
+            "accelerometer full scale",
+            minimum=0.0,
+            exclusive_minimum=True,
+        ),
+        ParameterSpec("imu_seed", int, "1", "noise seed (same seed, same noise)", minimum=0),
+        ParameterSpec("imu_frame_id", str, "", "frame of the accelerometer"),
+    )
+}
+NODE_DEFAULTS: dict[str, Any] = {
+    "imu_rate_hz": 1000.0,
+    "state_rate_hz": 1000.0,
+    "parts_rate_hz": 50.0,
+    "publish_batches": False,
+    "tick_period_s": 0.01,
+    "real_time_factor": 1.0,
+    "max_step_s": 0.05,
+    "command_timeout_s": 1.0,
+    "initial_parts": 1,
+    "part_start_m": 0.0,
+    "part_spacing_m": 0.02,
+    "feed_interval_s": 0.0,
+    "part_length_m": 0.01,
+    "sensor_positions_m": "0.1, 0.185",
+    "imu_noise_density_mps2_per_sqrt_hz": 0.0015,
+    "imu_bias_mps2": 0.0,
+    "imu_saturation_mps2": 156.9,
+    "imu_seed": 1,
+    "imu_frame_id": "carrier_imu",
+}

@@ -1,0 +1,1432 @@
+"""Exact event-driven solver of the sharp feeder model (numba kernels).
+
+Between events the carrier obeys a linear ODE with constant coefficients, ``m*x'' + c*x' + k*x =
+A*sin(w*tau + phi) + F0`` (``k = K_branch*cos(theta)``; ``F0`` the summed slip reaction of the parts
+with two-way coupling), whose solution is written in closed form as
+
+    x(tau) = alpha*C(tau) + beta*S(tau) + P*sin(w*tau + phi) + Q*cos(w*tau + phi) + X0
+
+with the homogeneous basis ``C = e^(sigma*tau)*cos(wd*tau)``, ``S = e^(sigma*tau)*sin(wd*tau)/wd``
+(under-damped), ``e^(sigma*tau)*cosh``/``sinh(g*tau)/g`` (over-damped) or ``e^(sigma*tau)``,
+``tau*e^(sigma*tau)`` (critical), ``sigma = -c/(2m)``, ``lambda = sigma^2 - k/m`` (``-wd^2`` or
+``g^2``). All three satisfy ``C' = sigma*C + lambda*S``, ``S' = sigma*S + C``, so every derivative
+of ``x`` is again of that form: the solver keeps a table of coefficient rows (rows 0-5: ``x`` to
+``x^(5)``, rows 6-9: the drive force ``F`` to ``F'''``).
+
+Every event function is ``sgn*row_r(tau) + c0 + c1*tau + c2*tau^2`` and is kept positive between
+events: the stiffness branch (``x*b`` or ``v*b``), the Filippov sliding bounds (velocity switching),
+the stick limits ``L -+ a``, the relative velocity of each slipping group and the track end. Roots
+are found with provably safe steps: with ``|f''| <= B`` on ``[tau, inf)`` (the homogeneous terms
+decay, so the bound at ``tau`` holds for all later times) the lower bound ``f + f'*h - B*h^2/2``
+stays positive up to the step ``h*``; the search advances by the smallest ``h*`` of all functions,
+so it can never jump over a root, and converges quadratically onto the first root from the safe
+side. A function that starts a piece at zero (just after its own event) is released by the sign of
+its first non-vanishing derivative (order 1 to 3).
+
+Parts are handled in *groups*: parts with the same friction (``L = mu_s*g*kappa``, ``D =
+mu_d*g*kappa``) that stick at the same time have identical velocity forever after, so a group
+carries one velocity history; its members differ only by a track offset. With two-way coupling a
+group also carries the summed mass of its members. :func:`advance` runs carrier and groups in one
+event loop (any coupling); with one-way coupling :func:`advance` can instead record the carrier's
+closed-form pieces, along which :func:`advance_groups` marches every group independently, in
+parallel.
+"""
+
+# mypy: disable-error-code="misc, no-untyped-def"
+from __future__ import annotations
+
+import math
+
+import numpy as np
+from numba import njit, prange
+
+EPS = 2.220446049250313e-16
+
+# model vector
+M_ONEWAY = 0  # carrier mass with one-way coupling (M + M_p + alpha*m)
+M_BASE = 1  # carrier mass without parts (M + alpha*m), two-way coupling
+DAMPING = 2
+K_FWD = 3  # K_f*cos(theta)
+K_BWD = 4
+TRACK = 5
+SWITCH = 6  # 0 displacement, 1 velocity
+COUPLING = 7  # 0 one-way, 1 two-way
+LOG_EVENTS = 8  # 0/1
+MODEL_SIZE = 9
+
+# carrier state vector
+S_T = 0
+S_X = 1
+S_V = 2
+S_MODE = 3  # +1 forward branch, -1 backward, 0 held (Filippov sliding, velocity switching only)
+S_SEG = 4  # drive segment index
+STATE_SIZE = 5
+
+# event kinds (public EventKind mirrors these)
+EV_BRANCH = 0
+EV_SLIP_START = 1
+EV_STICK = 2
+EV_REVERSAL = 3
+EV_DRIVE = 4
+EV_EXIT = 5
+EV_SLIDE_START = 6
+EV_SLIDE_END = 7
+
+# event-function kinds
+F_BRANCH = 0
+F_SLIDE_FWD = 1
+F_SLIDE_BWD = 2
+F_STICK_UP = 3
+F_STICK_DOWN = 4
+F_RELVEL = 5
+F_EXIT = 6
+
+STICK = 0
+SLIP_FORWARD = 1
+SLIP_BACKWARD = 2
+EXITED = -1
+
+STATUS_DONE = 0
+STATUS_BUFFER_FULL = 1
+STATUS_RESONANCE = 2
+STATUS_STUCK = 3
+
+NROWS = 10
+
+
+@njit(cache=True)
+def _fill_rows(rows, sigma, lam, A, w, phi, m, c, k, F0, x0, v0, held):
+    """Coefficient rows of x, x', ..., x^(5) (rows 0-5) and F, ..., F''' (rows 6-9); False at
+    resonance."""
+    for r in range(NROWS):
+        for j in range(5):
+            rows[r, j] = 0.0
+    if held:
+        rows[0, 4] = x0
+    else:
+        detune = k - m * w * w
+        det = detune * detune + (c * w) * (c * w)
+        if det <= (1e-13 * k) ** 2:
+            return False
+        P = A * detune / det
+        Q = -A * c * w / det
+        X0 = F0 / k
+        sp = math.sin(phi)
+        cp = math.cos(phi)
+        al = x0 - (P * sp + Q * cp + X0)
+        be = (v0 - w * (P * cp - Q * sp)) - sigma * al
+        rows[0, 0] = al
+        rows[0, 1] = be
+        rows[0, 2] = P
+        rows[0, 3] = Q
+        rows[0, 4] = X0
+        for r in range(1, 6):
+            a0 = rows[r - 1, 0]
+            b0 = rows[r - 1, 1]
+            rows[r, 0] = sigma * a0 + b0
+            rows[r, 1] = lam * a0 + sigma * b0
+            rows[r, 2] = -w * rows[r - 1, 3]
+            rows[r, 3] = w * rows[r - 1, 2]
+    rows[6, 2] = A
+    for r in range(7, NROWS):
+        rows[r, 2] = -w * rows[r - 1, 3]
+        rows[r, 3] = w * rows[r - 1, 2]
+    return True
+
+
+@njit(cache=True, inline="always")
+def _basis(tau, sigma, lam, root, r1, w, phi):
+    if lam < 0.0:
+        e = 1.0 if sigma == 0.0 else math.exp(sigma * tau)
+        cc = e * math.cos(root * tau)
+        ss = e * math.sin(root * tau) / root
+    elif lam > 0.0:
+        r2 = sigma - root
+        if 2.0 * root * tau < 1.0:
+            e2 = math.exp(r2 * tau)
+            em = math.expm1(2.0 * root * tau)
+            cc = e2 * (em + 2.0) * 0.5
+            ss = e2 * em / (2.0 * root)
+        else:
+            e1 = math.exp(r1 * tau)
+            e2 = math.exp(r2 * tau)
+            cc = 0.5 * (e1 + e2)
+            ss = (e1 - e2) / (2.0 * root)
+    else:
+        e = math.exp(sigma * tau)
+        cc = e
+        ss = tau * e
+    ang = w * tau + phi
+    return cc, ss, math.sin(ang), math.cos(ang)
+
+
+@njit(cache=True, inline="always")
+def _sup_t_exp(r, tau):
+    """sup of t*exp(r*t) over t >= tau, r < 0."""
+    tm = -1.0 / r
+    if tau >= tm:
+        return tau * math.exp(r * tau)
+    return tm * math.exp(-1.0)
+
+
+@njit(cache=True, inline="always")
+def _basis_bounds(tau, sigma, lam, root, r1):
+    """Bounds of |C| and |S| over [tau, inf)."""
+    if lam < 0.0:
+        if sigma == 0.0:
+            return 1.0, 1.0 / root
+        e = math.exp(sigma * tau)
+        return e, min(e / root, _sup_t_exp(sigma, tau))
+    if lam > 0.0:
+        e1 = math.exp(r1 * tau)
+        return e1, min(e1 / (2.0 * root), _sup_t_exp(r1, tau))
+    return math.exp(sigma * tau), _sup_t_exp(sigma, tau)
+
+
+@njit(cache=True, inline="always")
+def _basis_all(tau, sigma, lam, root, r1, w, phi):
+    """:func:`_basis` and :func:`_basis_bounds` together, sharing the exponentials."""
+    if lam < 0.0:
+        if sigma == 0.0:
+            e = 1.0
+            bs = 1.0 / root
+        else:
+            e = math.exp(sigma * tau)
+            tm = -1.0 / sigma
+            sup = tau * e if tau >= tm else tm * math.exp(-1.0)
+            bs = min(e / root, sup)
+        cc = e * math.cos(root * tau)
+        ss = e * math.sin(root * tau) / root
+        bc = e
+    elif lam > 0.0:
+        r2 = sigma - root
+        e2 = math.exp(r2 * tau)
+        if 2.0 * root * tau < 1.0:
+            em = math.expm1(2.0 * root * tau)
+            cc = e2 * (em + 2.0) * 0.5
+            ss = e2 * em / (2.0 * root)
+            e1 = e2 * (em + 1.0)
+        else:
+            e1 = math.exp(r1 * tau)
+            cc = 0.5 * (e1 + e2)
+            ss = (e1 - e2) / (2.0 * root)
+        tm = -1.0 / r1
+        sup = tau * e1 if tau >= tm else tm * math.exp(-1.0)
+        bc = e1
+        bs = min(e1 / (2.0 * root), sup)
+    else:
+        e = math.exp(sigma * tau)
+        cc = e
+        ss = tau * e
+        tm = -1.0 / sigma
+        bc = e
+        bs = tau * e if tau >= tm else tm * math.exp(-1.0)
+    ang = w * tau + phi
+    return cc, ss, math.sin(ang), math.cos(ang), bc, bs
+
+
+@njit(cache=True, inline="always")
+def _row(rows, r, cc, ss, sn, cs):
+    return rows[r, 0] * cc + rows[r, 1] * ss + rows[r, 2] * sn + rows[r, 3] * cs + rows[r, 4]
+
+
+@njit(cache=True, inline="always")
+def _row_bound(rows, r, bc, bs):
+    return (
+        abs(rows[r, 0]) * bc
+        + abs(rows[r, 1]) * bs
+        + math.sqrt(rows[r, 2] * rows[r, 2] + rows[r, 3] * rows[r, 3])
+        + abs(rows[r, 4])
+    )
+
+
+@njit(cache=True, inline="always")
+def _safe_step(f, d, B):
+    """Largest h with f + d*h - B*h^2/2 > 0 (f > 0): no root of f in [tau, tau + h)."""
+    if B <= 0.0:
+        if d >= 0.0:
+            return np.inf
+        return f / (-d)
+    disc = math.sqrt(d * d + 2.0 * B * f)
+    if d <= 0.0:
+        return 2.0 * f / (disc - d)
+    return (d + disc) / B
+
+
+# recorded carrier piece: scalars then rows 0-5 (x .. x^(5)) flattened
+P_T0 = 0
+P_LEN = 1
+P_SIGMA = 2
+P_LAM = 3
+P_ROOT = 4
+P_R1 = 5
+P_W = 6
+P_PHI = 7
+P_MODE = 8
+P_XE = 9  # x, x', x'' at the end of the piece
+P_VE = 10
+P_AE = 11
+P_ROWS = 12
+PIECE_WIDTH = P_ROWS + 30
+
+
+@njit(cache=True)
+def _record_piece(pieces, k, t0, length, sigma, lam, root, r1, w, phi, mode, rows, xe, ve, ae):
+    pieces[k, P_XE] = xe
+    pieces[k, P_VE] = ve
+    pieces[k, P_AE] = ae
+    pieces[k, P_T0] = t0
+    pieces[k, P_LEN] = length
+    pieces[k, P_SIGMA] = sigma
+    pieces[k, P_LAM] = lam
+    pieces[k, P_ROOT] = root
+    pieces[k, P_R1] = r1
+    pieces[k, P_W] = w
+    pieces[k, P_PHI] = phi
+    pieces[k, P_MODE] = mode
+    for r in range(6):
+        for j in range(5):
+            pieces[k, P_ROWS + 5 * r + j] = rows[r, j]
+
+
+DERIVATIVE_ZERO = 1e-10  # relative size below which a derivative counts as zero on release
+REL_FREE = 0  # positive: search from the start
+REL_SKIP = 1  # starts on its zero, provably positive from the returned offset on
+REL_NEVER = 2  # identically zero (e.g. a carrier at rest without drive): no event
+REL_NOW = 3  # at or across its zero, moving out: an event now
+
+
+@njit(cache=True)
+def _release(rows, r, sg, c0, c1, c2, T, cc, ss, sn, cs, bc, bs, der):
+    """Classify the event function ``sg*row_r + c0 + c1*s + c2*s^2`` at the start ``s = 0``.
+
+    The basis values (cc, ss, sn, cs) and bounds (bc, bs) are those at the start. A function on its
+    zero (just after its own event) is released when its first non-vanishing derivative (order 1-3)
+    points inward: the Taylor lower bound then proves it positive from the returned offset on.
+    """
+    scale = abs(sg) * _row_bound(rows, r, bc, bs) + abs(c0)
+    if scale == 0.0 or (sg == 0.0 and c1 == 0.0 and c0 > 0.0):
+        return REL_NEVER, 0.0
+    tol = 64.0 * EPS * scale
+    f = sg * _row(rows, r, cc, ss, sn, cs) + c0
+    if f > tol:
+        return REL_FREE, 0.0
+    der[0] = f
+    top = 5 if r < 6 else 9
+    for n in range(1, 4):
+        if r + n + 1 > top:
+            break
+        pd = c1 if n == 1 else (2.0 * c2 if n == 2 else 0.0)
+        der[n] = sg * _row(rows, r + n, cc, ss, sn, cs) + pd
+        B = abs(sg) * _row_bound(rows, r + n + 1, bc, bs)
+        if n == 1:
+            B += 2.0 * abs(c2)
+        if f >= -tol and der[n] > 0.0:
+            s0 = T if B == 0.0 else min(der[n] / B, T)
+            q = 0.0
+            fact = 1.0
+            pw = 1.0
+            for j in range(n + 1):
+                if j > 0:
+                    fact *= j
+                    pw *= s0
+                q += der[j] * pw / fact
+            q -= B * pw * s0 / (fact * (n + 1))
+            if q > 2.0 * tol:
+                return REL_SKIP, s0
+        # a derivative this close to zero is a tangency (e.g. the carrier leaving the sliding mode
+        # with x'' = 0): ignoring its sign only ignores a dip far below round-off of x
+        tol_n = DERIVATIVE_ZERO * (abs(sg) * _row_bound(rows, r + n, bc, bs) + abs(pd))
+        if der[n] < -tol_n:
+            break
+    return REL_NOW, 0.0
+
+
+@njit(cache=True, inline="always")
+def _step(f, d, B, f2, B3, h_cap):
+    """Safe step for f > 0 with slope d, |f''| <= B on [tau, inf), curvature f2 now, |f'''| <= B3.
+
+    The global quadratic bound gives h1; when h1 limits the search, the local bound
+    ``f'' >= f2 - B3*h`` on ``[tau, tau + h]`` usually allows a much longer step.
+    """
+    h1 = _safe_step(f, d, B)
+    if h1 < h_cap:
+        h_try = 4.0 * h1
+        if d < 0.0:
+            h_try = max(h1, 1.25 * f / (-d))
+        K = B3 * h_try - f2
+        h2 = _safe_step(f, d, K if K > 0.0 else 0.0)
+        if h2 > h_try:
+            h2 = h_try
+        if h2 > h1:
+            h1 = h2
+    return h1
+
+
+@njit(cache=True)
+def _classify(switch, mode_prev, x, v, F, dF, F0, m, kf, kb):
+    """Carrier mode (+1, -1, 0 = held) for a state on or near the switching surface."""
+    if switch == 0:
+        if x != 0.0:
+            return 1.0 if x > 0.0 else -1.0
+        if v != 0.0:
+            return 1.0 if v > 0.0 else -1.0
+        a = F + F0
+        if a != 0.0:
+            return 1.0 if a > 0.0 else -1.0
+        if dF != 0.0:
+            return 1.0 if dF > 0.0 else -1.0
+        return 1.0
+    if v != 0.0:
+        return 1.0 if v > 0.0 else -1.0
+    af = (F + F0 - kf * x) / m
+    ab = (F + F0 - kb * x) / m
+    if af > 0.0 and ab > 0.0:
+        return 1.0
+    if af < 0.0 and ab < 0.0:
+        return -1.0
+    if af <= 0.0 <= ab:
+        if af == 0.0 and ab == 0.0 and dF != 0.0:
+            return 1.0 if dF > 0.0 else -1.0
+        return 0.0
+    return mode_prev if mode_prev != 0.0 else 1.0
+
+
+@njit(cache=True)
+def _log(ev_t, ev_kind, ev_part, counters, t, kind, part):
+    n = counters[1]
+    ev_t[n] = t
+    ev_kind[n] = kind
+    ev_part[n] = part
+    counters[1] = n + 1
+
+
+@njit(cache=True)
+def _log_group(ev_t, ev_kind, ev_part, counters, t, kind, g, g_head, m_next):
+    i = g_head[g]
+    while i >= 0:
+        _log(ev_t, ev_kind, ev_part, counters, t, kind, i)
+        i = m_next[i]
+
+
+@njit(cache=True)
+def _group_lead(g, g_head, m_next, m_o):
+    lead = -np.inf
+    i = g_head[g]
+    while i >= 0:
+        if m_o[i] > lead:
+            lead = m_o[i]
+        i = m_next[i]
+    return lead
+
+
+@njit(cache=True)
+def advance(
+    model,
+    d_start,
+    d_omega,
+    d_amp,
+    d_phase,
+    d_logged,
+    state,
+    g_L,
+    g_D,
+    g_mass,
+    g_u,
+    g_y,
+    g_slip,
+    g_lead,
+    g_phase,
+    g_head,
+    m_group,
+    m_next,
+    m_o,
+    m_mass,
+    m_slip0,
+    m_exit_t,
+    t_end,
+    samples,
+    out_cx,
+    out_cv,
+    out_ca,
+    out_cb,
+    out_px,
+    out_pv,
+    out_pp,
+    ev_t,
+    ev_kind,
+    ev_part,
+    counters,
+    pieces,
+):
+    """Advance the carrier and all part groups from ``state[S_T]`` to ``t_end`` (in place).
+
+    ``counters`` = [samples written, events written, status, safe steps taken (diagnostic),
+    pieces recorded]. If ``pieces`` has rows, every closed-form piece of the carrier is recorded
+    there (see :func:`_record_piece`) for :func:`advance_groups`.
+    Samples ``samples[counters[0]:]`` with
+    time < the end of the run (<= ``t_end`` for the last piece) are written. Returns the status:
+    0 done, 1 event buffer full (state saved at the event time; call again with room), 2 exact
+    resonance of an undamped branch, 3 stuck (an event repeated at one instant without progress).
+    """
+    n_groups = g_L.shape[0]
+    n_members = m_group.shape[0]
+    n_samples = samples.shape[0]
+    switch = int(model[SWITCH])
+    two_way = model[COUPLING] != 0.0
+    log_events = model[LOG_EVENTS] != 0.0
+    c = model[DAMPING]
+    kf = model[K_FWD]
+    kb = model[K_BWD]
+    track = model[TRACK]
+    cap = ev_t.shape[0]
+
+    rows = np.zeros((NROWS, 5))
+    nfmax = 4 + 2 * n_groups
+    f_kind = np.zeros(nfmax, np.int64)
+    f_group = np.zeros(nfmax, np.int64)
+    f_row = np.zeros(nfmax, np.int64)
+    f_sgn = np.zeros(nfmax)
+    f_c0 = np.zeros(nfmax)
+    f_c1 = np.zeros(nfmax)
+    f_c2 = np.zeros(nfmax)
+    f_skip = np.zeros(nfmax)
+    f_zero = np.zeros(nfmax, np.bool_)
+    vals = np.zeros(NROWS)
+    r_abs_a = np.zeros(NROWS)
+    r_abs_b = np.zeros(NROWS)
+    r_amp = np.zeros(NROWS)
+    r_R = np.zeros(NROWS)
+    der = np.zeros(5)
+    bnds = np.zeros(NROWS)
+    gu_k = np.zeros(n_groups)
+    gy_k = np.zeros(n_groups)
+    zero_count = 0
+    h_rec = -1.0
+    ch = 1.0
+    sh = 0.0
+    sw = 0.0
+    cw = 1.0
+
+    record = pieces.shape[0] > 0
+    while True:
+        t0 = state[S_T]
+        if t0 >= t_end:
+            break
+        if (log_events and counters[1] + n_members + 2 > cap) or (
+            record and counters[4] + 1 > pieces.shape[0]
+        ):
+            counters[2] = STATUS_BUFFER_FULL
+            return STATUS_BUFFER_FULL
+        x0 = state[S_X]
+        v0 = state[S_V]
+        mode = state[S_MODE]
+        seg = int(state[S_SEG])
+        nseg = d_start.shape[0]
+        while seg + 1 < nseg and d_start[seg + 1] <= t0:
+            seg += 1
+        state[S_SEG] = seg
+        w = d_omega[seg]
+        A = d_amp[seg]
+        phi = np.fmod(d_phase[seg] + w * (t0 - d_start[seg]), 2.0 * math.pi)
+        piece_end = t_end
+        drive_end = False
+        if seg + 1 < nseg and d_start[seg + 1] < t_end:
+            piece_end = d_start[seg + 1]
+            drive_end = True
+        T = piece_end - t0
+
+        # carrier mass and parts' reaction force
+        if two_way:
+            m = model[M_BASE]
+            F0 = 0.0
+            for g in range(n_groups):
+                if g_head[g] < 0:
+                    continue
+                if g_phase[g] == STICK:
+                    m += g_mass[g]
+                elif g_phase[g] == SLIP_BACKWARD:
+                    F0 -= g_mass[g] * g_D[g]
+                else:
+                    F0 += g_mass[g] * g_D[g]
+        else:
+            m = model[M_ONEWAY]
+            F0 = 0.0
+        held = mode == 0.0
+        k = kf if mode >= 0.0 else kb
+        sigma = -c / (2.0 * m)
+        lam = sigma * sigma - k / m
+        root = math.sqrt(abs(lam))
+        r1 = 0.0
+        if lam > 0.0:
+            r1 = (k / m) / (sigma - root)
+        if not _fill_rows(rows, sigma, lam, A, w, phi, m, c, k, F0, x0, v0, held):
+            counters[2] = STATUS_RESONANCE
+            return STATUS_RESONANCE
+
+        # ---- event functions of this piece
+        nf = 0
+        if not held:
+            f_kind[nf] = F_BRANCH
+            f_row[nf] = switch
+            f_sgn[nf] = mode
+            f_c0[nf] = 0.0
+            f_c1[nf] = 0.0
+            f_c2[nf] = 0.0
+            nf += 1
+        else:
+            f_kind[nf] = F_SLIDE_FWD
+            f_row[nf] = 6
+            f_sgn[nf] = -1.0
+            f_c0[nf] = -(F0 - kf * x0)
+            f_c1[nf] = 0.0
+            f_c2[nf] = 0.0
+            nf += 1
+            f_kind[nf] = F_SLIDE_BWD
+            f_row[nf] = 6
+            f_sgn[nf] = 1.0
+            f_c0[nf] = F0 - kb * x0
+            f_c1[nf] = 0.0
+            f_c2[nf] = 0.0
+            nf += 1
+        lmin = np.inf
+        for g in range(n_groups):
+            if g_head[g] < 0:
+                continue
+            if g_phase[g] == STICK:
+                g_u[g] = v0
+                if g_L[g] < lmin:
+                    lmin = g_L[g]
+                if g_lead[g] + g_y[g] >= track:
+                    f_kind[nf] = F_EXIT
+                    f_group[nf] = g
+                    f_row[nf] = 0
+                    f_sgn[nf] = 0.0
+                    f_c0[nf] = track - g_lead[g] - g_y[g]
+                    f_c1[nf] = 0.0
+                    f_c2[nf] = 0.0
+                    nf += 1
+            else:
+                s_g = 1.0 if g_phase[g] == SLIP_BACKWARD else -1.0
+                ap = s_g * g_D[g]
+                f_kind[nf] = F_RELVEL
+                f_group[nf] = g
+                f_row[nf] = 1
+                f_sgn[nf] = s_g
+                f_c0[nf] = -s_g * g_u[g]
+                f_c1[nf] = -g_D[g]
+                f_c2[nf] = 0.0
+                nf += 1
+                f_kind[nf] = F_EXIT
+                f_group[nf] = g
+                f_row[nf] = 0
+                f_sgn[nf] = 1.0
+                f_c0[nf] = track - g_lead[g] - g_y[g] - x0
+                f_c1[nf] = -g_u[g]
+                f_c2[nf] = -0.5 * ap
+                nf += 1
+        if lmin < np.inf:
+            f_kind[nf] = F_STICK_UP
+            f_row[nf] = 2
+            f_sgn[nf] = -1.0
+            f_c0[nf] = lmin
+            f_c1[nf] = 0.0
+            f_c2[nf] = 0.0
+            nf += 1
+            f_kind[nf] = F_STICK_DOWN
+            f_row[nf] = 2
+            f_sgn[nf] = 1.0
+            f_c0[nf] = lmin
+            f_c1[nf] = 0.0
+            f_c2[nf] = 0.0
+            nf += 1
+
+        # ---- release functions that start on (or across) their zero
+        cc = 1.0
+        ss = 0.0
+        sn = math.sin(phi)
+        cs = math.cos(phi)
+        bc, bs = _basis_bounds(0.0, sigma, lam, root, r1)
+        stick_bound = _row_bound(rows, 2, bc, bs)
+        tau_e = T
+        hit = -1
+        for i in range(nf):
+            code, f_skip[i] = _release(
+                rows, f_row[i], f_sgn[i], f_c0[i], f_c1[i], f_c2[i], T, cc, ss, sn, cs, bc, bs, der
+            )
+            f_zero[i] = code == REL_NEVER
+            if code == REL_NOW:
+                tau_e = 0.0
+                hit = i
+                break
+            if (f_kind[i] == F_STICK_UP or f_kind[i] == F_STICK_DOWN) and stick_bound < lmin:
+                f_zero[i] = True  # |a| stays below every stick limit for the whole piece
+
+        # ---- safe stepping to the first root
+        # per-row bound pieces: |alpha|, |beta|, amplitude form (under-damped), sinusoid, constant
+        lo = 6 if held else 0
+        hi_r = 10 if held else 0
+        if not held:
+            # only the rows the piece's functions need: value up to r + 2, bound up to r + 3
+            for i in range(nf):
+                if not f_zero[i] and f_row[i] + 4 > hi_r:
+                    hi_r = f_row[i] + 4
+        for r in range(lo, hi_r):
+            r_abs_a[r] = abs(rows[r, 0])
+            r_abs_b[r] = abs(rows[r, 1])
+            r_amp[r] = math.sqrt(rows[r, 2] * rows[r, 2] + rows[r, 3] * rows[r, 3])
+            r_R[r] = np.inf
+            if lam < 0.0:
+                r_R[r] = math.sqrt(rows[r, 0] ** 2 + (rows[r, 1] / root) ** 2)
+        tau = 0.0
+        e_cc, e_ss, e_sn, e_cs = cc, ss, sn, cs
+        if hit < 0:
+            for r in range(6):
+                vals[r] = 0.0
+                bnds[r] = 0.0
+            while True:
+                cc, ss, sn, cs, bc, bs = _basis_all(tau, sigma, lam, root, r1, w, phi)
+                if held:
+                    vals[0] = rows[0, 4]
+                    bnds[0] = abs(rows[0, 4])
+                for r in range(lo, hi_r):
+                    vals[r] = _row(rows, r, cc, ss, sn, cs)
+                    bh = r_abs_a[r] * bc + r_abs_b[r] * bs
+                    bR = r_R[r] * bc
+                    bnds[r] = (bh if bh < bR else bR) + r_amp[r] + abs(rows[r, 4])
+                t_res = 8.0 * EPS * (abs(t0) + tau + 1e-3)
+                h = T - tau
+                for i in range(nf):
+                    if f_zero[i]:
+                        continue
+                    if tau < f_skip[i]:
+                        hi = f_skip[i] - tau
+                        if hi < h:
+                            h = hi
+                        continue
+                    r = f_row[i]
+                    sg = f_sgn[i]
+                    poly = f_c0[i] + tau * (f_c1[i] + tau * f_c2[i])
+                    f = sg * vals[r] + poly
+                    scale = abs(sg) * bnds[r] + abs(f_c0[i]) + tau * abs(f_c1[i])
+                    scale += tau * tau * abs(f_c2[i])
+                    if f <= 64.0 * EPS * scale:
+                        hit = i
+                        break
+                    d = sg * vals[r + 1] + f_c1[i] + 2.0 * tau * f_c2[i]
+                    B = abs(sg) * bnds[r + 2] + 2.0 * abs(f_c2[i])
+                    f2 = sg * vals[r + 2] + 2.0 * f_c2[i]
+                    h1 = _step(f, d, B, f2, abs(sg) * bnds[r + 3], h)
+                    if h1 <= t_res:
+                        hit = i
+                        break
+                    if h1 < h:
+                        h = h1
+                if hit >= 0:
+                    tau_e = tau
+                    e_cc, e_ss, e_sn, e_cs = cc, ss, sn, cs
+                    break
+                if h >= T - tau:
+                    tau_e = T
+                    break
+                tau += h
+                counters[3] += 1
+
+        # ---- samples in [t0, t0 + tau_e)  (the last piece of the run includes t_end)
+        last = hit < 0 and not drive_end
+        t_stop = t0 + tau_e
+        ns = counters[0]
+        n_rec = 0
+        h_rec = -1.0
+        tk_prev = 0.0
+        cc_k = 1.0
+        ss_k = 0.0
+        sn_k = 0.0
+        cs_k = 1.0
+        while ns < n_samples and (samples[ns] < t_stop or (last and samples[ns] <= t_end)):
+            tk = samples[ns] - t0
+            dt = tk - tk_prev
+            if n_rec > 0 and n_rec < 64 and abs(dt - h_rec) <= 1e-12 * h_rec:
+                # exact shift identities C(t+h) = C(h)C + lam*S(h)S, S(t+h) = S(h)C + C(h)S
+                c_new = ch * cc_k + lam * sh * ss_k
+                ss_k = sh * cc_k + ch * ss_k
+                cc_k = c_new
+                s_new = sn_k * cw + cs_k * sw
+                cs_k = cs_k * cw - sn_k * sw
+                sn_k = s_new
+                n_rec += 1
+            else:
+                cc_k, ss_k, sn_k, cs_k = _basis(tk, sigma, lam, root, r1, w, phi)
+                n_rec = 1
+                if ns + 1 < n_samples:
+                    h_new = samples[ns + 1] - samples[ns]
+                    if h_new > 0.0 and h_new != h_rec:
+                        h_rec = h_new
+                        ch, sh, sw, cw = _basis(h_rec, sigma, lam, root, r1, w, 0.0)
+            tk_prev = tk
+            cc, ss, sn, cs = cc_k, ss_k, sn_k, cs_k
+            xk = _row(rows, 0, cc, ss, sn, cs)
+            vk = 0.0 if held else _row(rows, 1, cc, ss, sn, cs)
+            ak = 0.0 if held else _row(rows, 2, cc, ss, sn, cs)
+            out_cx[ns] = xk
+            out_cv[ns] = vk
+            out_ca[ns] = ak
+            out_cb[ns] = int(mode)
+            if n_members > 0:
+                for g in range(n_groups):
+                    if g_head[g] < 0:
+                        continue
+                    if g_phase[g] == STICK:
+                        gu_k[g] = vk
+                        gy_k[g] = g_y[g]
+                    else:
+                        ap = g_D[g] if g_phase[g] == SLIP_BACKWARD else -g_D[g]
+                        gu_k[g] = g_u[g] + ap * tk
+                        gy_k[g] = g_y[g] + tk * (g_u[g] + 0.5 * ap * tk) - (xk - x0)
+                for j in range(n_members):
+                    g = m_group[j]
+                    if g < 0:
+                        out_px[ns, j] = np.nan
+                        out_pv[ns, j] = np.nan
+                        out_pp[ns, j] = EXITED
+                    else:
+                        out_px[ns, j] = m_o[j] + gy_k[g] + xk
+                        out_pv[ns, j] = gu_k[g]
+                        out_pp[ns, j] = g_phase[g]
+            ns += 1
+        counters[0] = ns
+
+        # ---- state at the end of the piece
+        if hit >= 0:
+            cc, ss, sn, cs = e_cc, e_ss, e_sn, e_cs
+        else:
+            cc, ss, sn, cs = _basis(tau_e, sigma, lam, root, r1, w, phi)
+        xe = _row(rows, 0, cc, ss, sn, cs)
+        ve = 0.0 if held else _row(rows, 1, cc, ss, sn, cs)
+        ae = 0.0 if held else _row(rows, 2, cc, ss, sn, cs)
+        Fe = A * sn
+        dFe = A * w * cs
+        te = t0 + tau_e
+        for g in range(n_groups):
+            if g_head[g] < 0:
+                continue
+            if g_phase[g] == STICK:
+                g_u[g] = ve
+            else:
+                ap = g_D[g] if g_phase[g] == SLIP_BACKWARD else -g_D[g]
+                g_y[g] += tau_e * (g_u[g] + 0.5 * ap * tau_e) - (xe - x0)
+                g_u[g] += ap * tau_e
+                g_slip[g] += tau_e
+        if record and tau_e > 0.0:
+            _record_piece(
+                pieces, counters[4], t0, tau_e, sigma, lam, root, r1, w, phi, mode, rows, xe, ve, ae
+            )
+            counters[4] += 1
+        state[S_T] = te
+        state[S_X] = xe
+        state[S_V] = ve
+        if hit < 0:
+            if drive_end:
+                state[S_T] = piece_end
+                state[S_SEG] = seg + 1
+                if log_events and d_logged[seg + 1] != 0:
+                    _log(ev_t, ev_kind, ev_part, counters, piece_end, EV_DRIVE, -1)
+                continue
+            state[S_T] = t_end
+            break
+
+        # ---- one event at te
+        if tau_e == 0.0:
+            zero_count += 1
+            if zero_count > 1000:
+                counters[2] = STATUS_STUCK
+                return STATUS_STUCK
+        else:
+            zero_count = 0
+        kind = f_kind[hit]
+        if kind == F_BRANCH:
+            if switch == 0:
+                state[S_X] = 0.0
+                new_mode = -mode
+                if ve == 0.0:
+                    new_mode = _classify(0, mode, 0.0, 0.0, Fe, dFe, F0, m, kf, kb)
+            else:
+                state[S_V] = 0.0
+                new_mode = _classify(1, mode, xe, 0.0, Fe, dFe, F0, m, kf, kb)
+            if new_mode != mode and log_events:
+                ev = EV_SLIDE_START if new_mode == 0.0 else EV_BRANCH
+                _log(ev_t, ev_kind, ev_part, counters, te, ev, -1)
+            state[S_MODE] = new_mode
+        elif kind in (F_SLIDE_FWD, F_SLIDE_BWD):
+            state[S_V] = 0.0
+            state[S_MODE] = 1.0 if kind == F_SLIDE_FWD else -1.0
+            if log_events:
+                _log(ev_t, ev_kind, ev_part, counters, te, EV_SLIDE_END, -1)
+        elif kind in (F_STICK_UP, F_STICK_DOWN):
+            new_phase = SLIP_BACKWARD if kind == F_STICK_UP else SLIP_FORWARD
+            limit = max(abs(ae), lmin) * (1.0 + 1e-12)
+            for g in range(n_groups):
+                if g_head[g] >= 0 and g_phase[g] == STICK and g_L[g] <= limit:
+                    g_phase[g] = new_phase
+                    g_u[g] = ve
+                    if log_events:
+                        _log_group(
+                            ev_t, ev_kind, ev_part, counters, te, EV_SLIP_START, g, g_head, m_next
+                        )
+        elif kind == F_RELVEL:
+            g = f_group[hit]
+            g_u[g] = ve
+            a_test = ae
+            if two_way and not held:
+                # carrier acceleration with this group stuck to it
+                Fs = F0 + (
+                    g_mass[g] * g_D[g] if g_phase[g] == SLIP_BACKWARD else -g_mass[g] * g_D[g]
+                )
+                a_test = (Fe + Fs - c * ve - k * xe) / (m + g_mass[g])
+            if abs(a_test) <= g_L[g]:
+                g_phase[g] = STICK
+                if log_events:
+                    _log_group(ev_t, ev_kind, ev_part, counters, te, EV_STICK, g, g_head, m_next)
+                # merge with a sticking group of the same friction: identical futures
+                for h2 in range(n_groups):
+                    if (
+                        h2 != g
+                        and g_head[h2] >= 0
+                        and g_phase[h2] == STICK
+                        and g_L[h2] == g_L[g]
+                        and g_D[h2] == g_D[g]
+                    ):
+                        shift = g_y[g] - g_y[h2]
+                        i = g_head[g]
+                        tail = -1
+                        while i >= 0:
+                            m_o[i] += shift
+                            m_group[i] = h2
+                            m_slip0[i] = g_slip[h2] - (g_slip[g] - m_slip0[i])
+                            tail = i
+                            i = m_next[i]
+                        m_next[tail] = g_head[h2]
+                        g_head[h2] = g_head[g]
+                        g_head[g] = -1
+                        g_mass[h2] += g_mass[g]
+                        g_lead[h2] = max(g_lead[h2], g_lead[g] + shift)
+                        break
+            else:
+                g_phase[g] = SLIP_BACKWARD if a_test > 0.0 else SLIP_FORWARD
+                if log_events:
+                    _log_group(ev_t, ev_kind, ev_part, counters, te, EV_REVERSAL, g, g_head, m_next)
+        elif kind == F_EXIT:
+            g = f_group[hit]
+            lead_i = -1
+            i = g_head[g]
+            while i >= 0:
+                if lead_i < 0 or m_o[i] > m_o[lead_i]:
+                    lead_i = i
+                i = m_next[i]
+            # unlink lead_i
+            if g_head[g] == lead_i:
+                g_head[g] = m_next[lead_i]
+            else:
+                i = g_head[g]
+                while m_next[i] != lead_i:
+                    i = m_next[i]
+                m_next[i] = m_next[lead_i]
+            m_next[lead_i] = -1
+            m_slip0[lead_i] = g_slip[g] - m_slip0[lead_i]
+            m_exit_t[lead_i] = te
+            m_o[lead_i] = m_o[lead_i] + g_y[g] + xe  # lab position at exit
+            m_group[lead_i] = -1
+            g_mass[g] -= m_mass[lead_i]
+            if g_head[g] >= 0:
+                g_lead[g] = _group_lead(g, g_head, m_next, m_o)
+            if log_events:
+                _log(ev_t, ev_kind, ev_part, counters, te, EV_EXIT, lead_i)
+    counters[2] = STATUS_DONE
+    return STATUS_DONE
+
+
+@njit(cache=True, parallel=True)
+def advance_many(
+    models,
+    d_start,
+    d_omega,
+    d_amp,
+    d_phase,
+    d_logged,
+    d_offset,
+    states,
+    g_L,
+    g_D,
+    g_mass,
+    t_end,
+    results,
+):
+    """Many independent runs (one part each, no samples, no event log) in parallel.
+
+    ``models[p]``/``states[p]`` per point, the drive of point ``p`` is
+    ``d_*[d_offset[p]:d_offset[p+1]]``. ``results[p]`` = [status, part displacement, slip time,
+    exit time (nan), time reached].
+    """
+    n = models.shape[0]
+    for p in prange(n):
+        a = d_offset[p]
+        b = d_offset[p + 1]
+        gl = np.array([g_L[p]])
+        gd = np.array([g_D[p]])
+        gm = np.array([g_mass[p]])
+        gu = np.zeros(1)
+        gy = np.zeros(1)
+        gs = np.zeros(1)
+        glead = np.zeros(1)
+        gph = np.zeros(1, np.int8)
+        gh = np.zeros(1, np.int64)
+        mg = np.zeros(1, np.int64)
+        mn = np.full(1, -1, np.int64)
+        mo = np.zeros(1)
+        mm = np.array([g_mass[p]])
+        ms = np.zeros(1)
+        me = np.full(1, np.nan)
+        st = states[p].copy()
+        cnt = np.zeros(5, np.int64)
+        empty = np.zeros(0)
+        e8 = np.zeros(0, np.int8)
+        e2 = np.zeros((0, 1))
+        e28 = np.zeros((0, 1), np.int8)
+        ei = np.zeros(0, np.int64)
+        status = advance(
+            models[p],
+            d_start[a:b],
+            d_omega[a:b],
+            d_amp[a:b],
+            d_phase[a:b],
+            d_logged[a:b],
+            st,
+            gl,
+            gd,
+            gm,
+            gu,
+            gy,
+            gs,
+            glead,
+            gph,
+            gh,
+            mg,
+            mn,
+            mo,
+            mm,
+            ms,
+            me,
+            t_end[p],
+            empty,
+            empty,
+            empty,
+            empty,
+            e8,
+            e2,
+            e2,
+            e28,
+            empty,
+            e8,
+            ei,
+            cnt,
+            np.zeros((0, PIECE_WIDTH)),
+        )
+        results[p, 0] = status
+        if mg[0] >= 0:
+            results[p, 1] = gy[0] + st[S_X]
+            results[p, 2] = gs[0] - ms[0]
+        else:
+            results[p, 1] = mo[0]
+            results[p, 2] = ms[0]
+        results[p, 3] = me[0]
+        results[p, 4] = st[S_T]
+
+
+@njit(cache=True)
+def _march_group(
+    g,
+    pieces,
+    n_pieces,
+    track,
+    t_end,
+    samples,
+    ns0,
+    out_cx,
+    out_cv,
+    g_L,
+    g_D,
+    g_mass,
+    g_u,
+    g_y,
+    g_slip,
+    g_lead,
+    g_phase,
+    g_head,
+    m_group,
+    m_next,
+    m_o,
+    m_mass,
+    m_slip0,
+    m_exit_t,
+    out_px,
+    out_pv,
+    out_pp,
+    ev_t,
+    ev_kind,
+    ev_part,
+    ev_n,
+):
+    """One group of parts along recorded carrier pieces (one-way coupling); returns a status.
+
+    Group events go to row ``g`` of the event buffers with ``ev_part = -1`` (the caller expands
+    them to the group's members), exits with the part index.
+    """
+    rows = np.zeros((NROWS, 5))
+    der = np.zeros(5)
+    n_samples = samples.shape[0]
+    cap = ev_t.shape[1]
+    L = g_L[g]
+    D = g_D[g]
+    ns = ns0
+    zero_count = 0
+    f_row = np.zeros(2, np.int64)
+    f_kind = np.zeros(2, np.int64)
+    f_sgn = np.zeros(2)
+    f_c0 = np.zeros(2)
+    f_c1 = np.zeros(2)
+    f_c2 = np.zeros(2)
+    f_skip = np.zeros(2)
+    f_zero = np.zeros(2, np.bool_)
+    r_abs_a = np.zeros(6)
+    r_abs_b = np.zeros(6)
+    r_amp = np.zeros(6)
+    r_R = np.zeros(6)
+    vals = np.zeros(6)
+    bnds = np.zeros(6)
+    for k in range(n_pieces):
+        t0 = pieces[k, P_T0]
+        T = pieces[k, P_LEN]
+        sigma = pieces[k, P_SIGMA]
+        lam = pieces[k, P_LAM]
+        root = pieces[k, P_ROOT]
+        r1 = pieces[k, P_R1]
+        w = pieces[k, P_W]
+        phi = pieces[k, P_PHI]
+        held = pieces[k, P_MODE] == 0.0
+        for r in range(6):
+            for j in range(5):
+                rows[r, j] = pieces[k, P_ROWS + 5 * r + j]
+            r_abs_a[r] = abs(rows[r, 0])
+            r_abs_b[r] = abs(rows[r, 1])
+            r_amp[r] = math.sqrt(rows[r, 2] * rows[r, 2] + rows[r, 3] * rows[r, 3])
+            r_R[r] = np.inf
+            if lam < 0.0:
+                r_R[r] = math.sqrt(rows[r, 0] ** 2 + (rows[r, 1] / root) ** 2)
+        sphi = math.sin(phi)
+        cphi = math.cos(phi)
+        last = k == n_pieces - 1
+        ts = 0.0  # start of the current sub-piece (local time)
+        while True:
+            if g_head[g] < 0:
+                # the group is empty: nothing more to do
+                return STATUS_DONE
+            if ev_n[g] + 2 > cap:
+                return STATUS_BUFFER_FULL
+            if ts == 0.0:
+                cc, ss, sn, cs = 1.0, 0.0, sphi, cphi
+                bc, bs = _basis_bounds(0.0, sigma, lam, root, r1)
+            else:
+                cc, ss, sn, cs, bc, bs = _basis_all(ts, sigma, lam, root, r1, w, phi)
+            xs = _row(rows, 0, cc, ss, sn, cs)
+            vs = 0.0 if held else _row(rows, 1, cc, ss, sn, cs)
+            ph = g_phase[g]
+            if ph == STICK:
+                g_u[g] = vs
+            nf = 0
+            if ph == STICK:
+                f_kind[0] = F_STICK_UP
+                f_row[0] = 2
+                f_sgn[0] = -1.0
+                f_kind[1] = F_STICK_DOWN
+                f_row[1] = 2
+                f_sgn[1] = 1.0
+                for i in range(2):
+                    f_c0[i] = L
+                    f_c1[i] = 0.0
+                    f_c2[i] = 0.0
+                nf = 2
+                if g_lead[g] + g_y[g] >= track:
+                    # a sticking part past the track end (put there, or the track shortened)
+                    f_kind[0] = F_EXIT
+                    f_sgn[0] = 0.0
+                    f_c0[0] = track - g_lead[g] - g_y[g]
+                    nf = 1
+            else:
+                s_g = 1.0 if ph == SLIP_BACKWARD else -1.0
+                f_kind[0] = F_RELVEL
+                f_row[0] = 1
+                f_sgn[0] = s_g
+                f_c0[0] = -s_g * g_u[g]
+                f_c1[0] = -D
+                f_c2[0] = 0.0
+                f_kind[1] = F_EXIT
+                f_row[1] = 0
+                f_sgn[1] = 1.0
+                f_c0[1] = track - g_lead[g] - g_y[g] - xs
+                f_c1[1] = -g_u[g]
+                f_c2[1] = -0.5 * s_g * D
+                nf = 2
+            rem = T - ts
+            hit = -1
+            if ph == STICK and nf == 2 and _row_bound(rows, 2, bc, bs) < L:
+                nf = 0  # |a| stays below the stick limit for the rest of the piece
+            for i in range(nf):
+                code, f_skip[i] = _release(
+                    rows,
+                    f_row[i],
+                    f_sgn[i],
+                    f_c0[i],
+                    f_c1[i],
+                    f_c2[i],
+                    rem,
+                    cc,
+                    ss,
+                    sn,
+                    cs,
+                    bc,
+                    bs,
+                    der,
+                )
+                f_zero[i] = code == REL_NEVER
+                if code == REL_NOW:
+                    hit = i
+                    break
+            s = 0.0
+            if hit < 0 and nf > 0:
+                top = 4 if ph == STICK else 3  # highest row whose value/bound is needed, +1
+                while True:
+                    tau = ts + s
+                    if s > 0.0:
+                        cc, ss, sn, cs, bc, bs = _basis_all(tau, sigma, lam, root, r1, w, phi)
+                    if held:
+                        for r in range(6):
+                            vals[r] = 0.0
+                            bnds[r] = 0.0
+                        vals[0] = rows[0, 4]
+                        bnds[0] = abs(rows[0, 4])
+                    else:
+                        for r in range(top + 2):
+                            if r < top + 1:
+                                vals[r] = _row(rows, r, cc, ss, sn, cs)
+                            bh = r_abs_a[r] * bc + r_abs_b[r] * bs
+                            bR = r_R[r] * bc
+                            bnds[r] = (bh if bh < bR else bR) + r_amp[r] + abs(rows[r, 4])
+                    t_res = 8.0 * EPS * (abs(t0) + tau + 1e-3)
+                    h = rem - s
+                    for i in range(nf):
+                        if f_zero[i]:
+                            continue
+                        if s < f_skip[i]:
+                            if f_skip[i] - s < h:
+                                h = f_skip[i] - s
+                            continue
+                        r = f_row[i]
+                        sg = f_sgn[i]
+                        f = sg * vals[r] + f_c0[i] + s * (f_c1[i] + s * f_c2[i])
+                        scale = abs(sg) * bnds[r] + abs(f_c0[i]) + s * abs(f_c1[i])
+                        scale += s * s * abs(f_c2[i])
+                        if f <= 64.0 * EPS * scale:
+                            hit = i
+                            break
+                        d = sg * vals[r + 1] + f_c1[i] + 2.0 * s * f_c2[i]
+                        B = abs(sg) * bnds[r + 2] + 2.0 * abs(f_c2[i])
+                        f2 = sg * vals[r + 2] + 2.0 * f_c2[i]
+                        h1 = _step(f, d, B, f2, abs(sg) * bnds[r + 3], h)
+                        if h1 <= t_res:
+                            hit = i
+                            break
+                        if h1 < h:
+                            h = h1
+                    if hit >= 0 or h >= rem - s:
+                        break
+                    s += h
+            tau_e = ts + s if hit >= 0 else T
+            t_stop = t0 + tau_e
+            # samples in [t0 + ts, t_stop) (the run's last piece includes t_end)
+            ap = 0.0
+            if ph == SLIP_BACKWARD:
+                ap = D
+            elif ph == SLIP_FORWARD:
+                ap = -D
+            while ns < n_samples and (
+                samples[ns] < t_stop or (last and hit < 0 and samples[ns] <= t_end)
+            ):
+                xk = out_cx[ns]
+                if ph == STICK:
+                    uk = out_cv[ns]
+                    yk = g_y[g]
+                else:
+                    sk = samples[ns] - t0 - ts
+                    uk = g_u[g] + ap * sk
+                    yk = g_y[g] + sk * (g_u[g] + 0.5 * ap * sk) - (xk - xs)
+                i = g_head[g]
+                while i >= 0:
+                    out_px[ns, i] = m_o[i] + yk + xk
+                    out_pv[ns, i] = uk
+                    out_pp[ns, i] = ph
+                    i = m_next[i]
+                ns += 1
+            # state at tau_e (the piece's recorded end state when it runs to its end)
+            if hit >= 0:  # the basis values are those at tau_e already
+                xe = _row(rows, 0, cc, ss, sn, cs)
+                ve = 0.0 if held else _row(rows, 1, cc, ss, sn, cs)
+                ae = 0.0 if held else _row(rows, 2, cc, ss, sn, cs)
+            else:
+                xe = pieces[k, P_XE]
+                ve = pieces[k, P_VE]
+                ae = pieces[k, P_AE]
+            se = tau_e - ts
+            if ph == STICK:
+                g_u[g] = ve
+            else:
+                g_y[g] += se * (g_u[g] + 0.5 * ap * se) - (xe - xs)
+                g_u[g] += ap * se
+                g_slip[g] += se
+            if hit < 0:
+                break
+            if se == 0.0:
+                zero_count += 1
+                if zero_count > 1000:
+                    return STATUS_STUCK
+            else:
+                zero_count = 0
+            te = t0 + tau_e
+            kind = f_kind[hit]
+            n = ev_n[g]
+            if kind in (F_STICK_UP, F_STICK_DOWN):
+                g_phase[g] = SLIP_BACKWARD if kind == F_STICK_UP else SLIP_FORWARD
+                g_u[g] = ve
+                ev_t[g, n] = te
+                ev_kind[g, n] = EV_SLIP_START
+                ev_part[g, n] = -1
+                ev_n[g] = n + 1
+            elif kind == F_RELVEL:
+                g_u[g] = ve
+                if abs(ae) <= L:
+                    g_phase[g] = STICK
+                    ev_kind[g, n] = EV_STICK
+                else:
+                    g_phase[g] = SLIP_BACKWARD if ae > 0.0 else SLIP_FORWARD
+                    ev_kind[g, n] = EV_REVERSAL
+                ev_t[g, n] = te
+                ev_part[g, n] = -1
+                ev_n[g] = n + 1
+            else:
+                lead_i = -1
+                i = g_head[g]
+                while i >= 0:
+                    if lead_i < 0 or m_o[i] > m_o[lead_i]:
+                        lead_i = i
+                    i = m_next[i]
+                if g_head[g] == lead_i:
+                    g_head[g] = m_next[lead_i]
+                else:
+                    i = g_head[g]
+                    while m_next[i] != lead_i:
+                        i = m_next[i]
+                    m_next[i] = m_next[lead_i]
+                m_next[lead_i] = -1
+                m_slip0[lead_i] = g_slip[g] - m_slip0[lead_i]
+                m_exit_t[lead_i] = te
+                m_o[lead_i] = m_o[lead_i] + g_y[g] + xe
+                m_group[lead_i] = -1
+                g_mass[g] -= m_mass[lead_i]
+                for j in range(ns, n_samples):
+                    out_px[j, lead_i] = np.nan
+                    out_pv[j, lead_i] = np.nan
+                    out_pp[j, lead_i] = EXITED
+                if g_head[g] >= 0:
+                    g_lead[g] = _group_lead(g, g_head, m_next, m_o)
+                ev_t[g, n] = te
+                ev_kind[g, n] = EV_EXIT
+                ev_part[g, n] = lead_i
+                ev_n[g] = n + 1
+            ts = tau_e
+    return STATUS_DONE
+
+
+@njit(cache=True, parallel=True)
+def advance_groups(
+    pieces,
+    n_pieces,
+    track,
+    t_end,
+    samples,
+    ns0,
+    out_cx,
+    out_cv,
+    g_L,
+    g_D,
+    g_mass,
+    g_u,
+    g_y,
+    g_slip,
+    g_lead,
+    g_phase,
+    g_head,
+    m_group,
+    m_next,
+    m_o,
+    m_mass,
+    m_slip0,
+    m_exit_t,
+    out_px,
+    out_pv,
+    out_pp,
+    ev_t,
+    ev_kind,
+    ev_part,
+    ev_n,
+    status,
+):
+    """All groups along recorded carrier pieces, in parallel (one-way coupling: independent).
+
+    ``status[g]`` receives each group's status; a group stopped by a full event buffer (row ``g``)
+    must be re-run with more room from a saved copy of its state.
+    """
+    for g in prange(g_L.shape[0]):
+        if g_head[g] < 0 or status[g] == STATUS_DONE:
+            continue
+        status[g] = _march_group(
+            g,
+            pieces,
+            n_pieces,
+            track,
+            t_end,
+            samples,
+            ns0,
+            out_cx,
+            out_cv,
+            g_L,
+            g_D,
+            g_mass,
+            g_u,
+            g_y,
+            g_slip,
+            g_lead,
+            g_phase,
+            g_head,
+            m_group,
+            m_next,
+            m_o,
+            m_mass,
+            m_slip0,
+            m_exit_t,
+            out_px,
+            out_pv,
+            out_pp,
+            ev_t,
+            ev_kind,
+            ev_part,
+            ev_n,
+        )

@@ -1,0 +1,1035 @@
+"""Public simulation API of the feeder model: carrier (platform) and parts in stick-slip.
+
+The sharp model (``stiffness_model="sharp"``) is solved exactly, event by event
+(:mod:`feeder_ros.physics.sharp_solver`): no time step, the only errors are floating-point round-off
+and root polishing to round-off level. ``simulate`` hands the logistic model to
+:func:`feeder_ros.physics.smooth_model.simulate_smooth`.
+
+Model (SI units), paper Eqs. 6, 7, 11-16 as read in MODEL-NOTES:
+
+* Carrier: ``M_eq*x'' + c*x' + K(s)*cos(theta)*x = F(t) + R(t)``, ``K = K_f`` for ``s > 0`` and
+  ``K_b`` for ``s < 0`` with ``s = x`` (``stiffness_switch="displacement"``, default) or ``s = x'``
+  (``"velocity"``). The carrier starts at rest on the switching surface in the forward branch
+  (``x''' > 0`` there). Velocity switching, Filippov convention: at ``x' = 0`` the carrier crosses
+  if both branches push it the same way; it is *held* (``x' = x'' = 0``, branch code 0) while ``F +
+  R`` lies between ``K_b*cos(theta)*x`` and ``K_f*cos(theta)*x``, and leaves into the branch whose
+  force first lets it go.
+* Coupling ``one_way`` (default): ``M_eq = M + M_p + alpha*m``
+  (``FeederParameters.equivalent_mass_kg``) and ``R = 0``: the parts never act on the carrier.
+  ``two_way`` (Eq. 14): ``M_eq = M + alpha*m + sum of the masses of the sticking parts``; each
+  slipping part adds the reaction ``R_i = -M_i*a_i`` of the friction it receives (``a_i =
+  +-mu_d*g*kappa``).
+* Part (Coulomb stick-slip): sticks while ``|x''| <= mu_s*g*kappa``; slips with acceleration
+  ``mu_d*g*kappa*sign(x' - u)`` (friction drags it toward the carrier's velocity); when ``u = x'``
+  again it re-sticks if the stick condition holds then (two-way: with its own mass back on the
+  carrier), otherwise it slips the other way.
+* Positions: ``part_x_m`` and ``part_v_mps`` are in the lab frame. A part's place on the track is
+  ``part_x_m - carrier_x_m`` (the track moves with the carrier); a part is put on the track at
+  ``PartSpec.position_m`` and sticks. It leaves when its track position passes ``track_length_m`` (a
+  sticking part keeps its track position, so parts leave only while slipping). After leaving its
+  column holds ``nan`` positions/velocities and phase ``Phase.EXITED`` (-1); the exit is an event.
+* Drive: :class:`~feeder_ros.physics.drive.DriveSchedule`, phase-continuous; ramps are applied as a
+  fine staircase that the solver integrates exactly.
+
+Output samples are taken at the requested times from the closed-form solution (``simulate``: exact
+multiples ``k/output_rate_hz``). A sample at an event instant shows the state just after the event.
+
+How it runs: parts of equal friction that stick together share one velocity history for ever (a
+*group*; exact, not an approximation), so 1000 identical parts cost about one. With two-way
+coupling, or with few groups, one event loop advances carrier and groups together. With one-way
+coupling and many groups (``FeederSimulator.parallel_min_groups``) the carrier is solved alone
+first, its closed-form pieces are recorded, and the groups are then marched along them
+independently, in parallel (numba ``prange``); group events are expanded to one event per part.
+"""
+
+from __future__ import annotations
+
+import enum
+import math
+from collections.abc import Sequence
+from dataclasses import dataclass, replace
+from typing import Any
+
+import numpy as np
+import numpy.typing as npt
+
+from feeder_ros.physics import sharp_solver as _k
+from feeder_ros.physics.drive import DriveChange, DriveSchedule
+from feeder_ros.physics.parameters import FeederParameters, ParameterError
+
+__all__ = [
+    "EventKind",
+    "FeederSimulator",
+    "ManySummary",
+    "PartSpec",
+    "Phase",
+    "SimulationError",
+    "SimulationResult",
+    "simulate",
+    "simulate_carrier",
+    "simulate_many",
+    "simulate_parts",
+]
+
+F64 = npt.NDArray[np.float64]
+I8 = npt.NDArray[np.int8]
+I64 = npt.NDArray[np.int64]
+
+
+class Phase(enum.IntEnum):
+    """Contact phase of a part (``part_phase`` codes)."""
+
+    EXITED = -1  #: left the track (column frozen at nan)
+    STICK = 0
+    SLIP_FORWARD = 1  #: the part slides forward over the carrier (u > x')
+    SLIP_BACKWARD = 2  #: the part lags behind the carrier (u < x')
+
+
+class EventKind(enum.IntEnum):
+    """Kinds of located events (``event_kind`` codes)."""
+
+    BRANCH_SWITCH = _k.EV_BRANCH  #: stiffness branch changes (carrier)
+    SLIP_START = _k.EV_SLIP_START  #: a sticking part starts to slip
+    STICK = _k.EV_STICK  #: relative velocity zero and the part sticks again
+    SLIP_REVERSAL = _k.EV_REVERSAL  #: relative velocity zero, the part slips the other way
+    DRIVE_CHANGE = _k.EV_DRIVE  #: a drive change (first step of a ramp) takes effect
+    PART_EXIT = _k.EV_EXIT  #: a part passes the track end
+    SLIDING_START = _k.EV_SLIDE_START  #: velocity switching: carrier held at x' = 0 (Filippov)
+    SLIDING_END = _k.EV_SLIDE_END  #: velocity switching: carrier released
+
+
+class SimulationError(RuntimeError):
+    """The solver could not continue; the message says why and where."""
+
+
+def _finite(
+    name: str, value: object, *, positive: bool = False, nonnegative: bool = False
+) -> float:
+    if isinstance(value, bool) or not isinstance(value, int | float | np.floating | np.integer):
+        raise ParameterError(f"{name}={value!r} is not a number")
+    number = float(value)
+    if not math.isfinite(number):
+        raise ParameterError(f"{name}={value!r} is not finite")
+    if positive and number <= 0.0:
+        raise ParameterError(f"{name}={value!r} must be > 0")
+    if nonnegative and number < 0.0:
+        raise ParameterError(f"{name}={value!r} must be >= 0")
+    return number
+
+
+@dataclass(frozen=True)
+class PartSpec:
+    """One part: track position where it is put down, mass and friction (``None``: from the
+    params)."""
+
+    position_m: float = 0.0
+    mass_kg: float | None = None
+    static_friction: float | None = None
+    kinetic_friction: float | None = None
+
+    def __post_init__(self) -> None:
+        object.__setattr__(self, "position_m", _finite("position_m", self.position_m))
+        for name in ("mass_kg", "static_friction", "kinetic_friction"):
+            value = getattr(self, name)
+            if value is not None:
+                object.__setattr__(self, name, _finite(name, value, positive=True))
+        if (
+            self.static_friction is not None
+            and self.kinetic_friction is not None
+            and self.kinetic_friction > self.static_friction
+        ):
+            raise ParameterError(
+                f"kinetic_friction={self.kinetic_friction!r} must not exceed "
+                f"static_friction={self.static_friction!r}"
+            )
+
+    def resolved(self, params: FeederParameters) -> tuple[float, float, float]:
+        """(mass_kg, static_friction, kinetic_friction) with ``None`` replaced from ``params``."""
+        mass = params.part_mass_kg if self.mass_kg is None else self.mass_kg
+        mu_s = params.static_friction if self.static_friction is None else self.static_friction
+        mu_d = params.kinetic_friction if self.kinetic_friction is None else self.kinetic_friction
+        if mu_d > mu_s:
+            raise ParameterError(
+                f"part kinetic_friction={mu_d!r} must not exceed static_friction={mu_s!r}"
+            )
+        return mass, mu_s, mu_d
+
+
+@dataclass(frozen=True)
+class SimulationResult:
+    """Samples and events of a run (or of one ``FeederSimulator.advance`` chunk).
+
+    Sample arrays: ``t_s`` (n,); carrier ``carrier_x_m``, ``carrier_v_mps``, ``carrier_a_mps2``
+    (n,),
+    ``branch`` (n,) int8 (+1 forward K_f, -1 backward K_b, 0 held by velocity switching);
+    parts ``part_x_m``, ``part_v_mps`` (n, N) lab frame, ``part_phase`` (n, N) int8
+    (:class:`Phase`).
+    Events, time-ordered: ``event_t_s``, ``event_kind`` (:class:`EventKind`), ``event_part`` (part
+    index, -1 for carrier/drive events). Exact per-part totals over the run: ``part_start_t_s``,
+    ``part_start_x_m`` (lab), ``part_end_t_s`` (exit time or end of run), ``part_end_x_m``,
+    ``part_slip_time_s`` (time spent slipping) and ``part_exit_t_s`` (nan if still on the track).
+    """
+
+    t_s: F64
+    carrier_x_m: F64
+    carrier_v_mps: F64
+    carrier_a_mps2: F64
+    branch: I8
+    part_x_m: F64
+    part_v_mps: F64
+    part_phase: I8
+    event_t_s: F64
+    event_kind: I8
+    event_part: I64
+    part_start_t_s: F64
+    part_start_x_m: F64
+    part_end_t_s: F64
+    part_end_x_m: F64
+    part_slip_time_s: F64
+    part_exit_t_s: F64
+
+    @property
+    def part_count(self) -> int:
+        return int(self.part_start_t_s.shape[0])
+
+    def mean_part_speed_mps(self) -> F64:
+        """Mean lab-frame speed of each part (N,): displacement over time on the track (exact)."""
+        span = self.part_end_t_s - self.part_start_t_s
+        with np.errstate(invalid="ignore", divide="ignore"):
+            out = (self.part_end_x_m - self.part_start_x_m) / span
+        return np.asarray(np.where(span > 0.0, out, np.nan), dtype=np.float64)
+
+    def slip_fraction(self) -> F64:
+        """Fraction of its time on the track that each part spent slipping (N,) (exact)."""
+        span = self.part_end_t_s - self.part_start_t_s
+        with np.errstate(invalid="ignore", divide="ignore"):
+            out = self.part_slip_time_s / span
+        return np.asarray(np.where(span > 0.0, out, np.nan), dtype=np.float64)
+
+    def exited_count(self) -> int:
+        """Number of parts that left the track (the feed count)."""
+        return int(np.count_nonzero(np.isfinite(self.part_exit_t_s)))
+
+
+@dataclass(frozen=True)
+class ManySummary:
+    """Summaries of :func:`simulate_many`, one entry per operating point (one part each)."""
+
+    mean_part_speed_mps: F64
+    slip_fraction: F64
+    exit_t_s: F64  #: nan when the part stayed on the track
+
+
+def _model_vector(params: FeederParameters, log_events: bool = True) -> F64:
+    model = np.zeros(_k.MODEL_SIZE)
+    cos_t = params.cos_theta
+    model[_k.M_ONEWAY] = params.equivalent_mass_kg
+    model[_k.M_BASE] = params.carrier_mass_kg + params.mass_coefficient * params.plate_mass_kg
+    model[_k.DAMPING] = params.damping_ns_per_m
+    model[_k.K_FWD] = params.forward_stiffness_n_per_m * cos_t
+    model[_k.K_BWD] = params.backward_stiffness_n_per_m * cos_t
+    model[_k.TRACK] = params.track_length_m
+    model[_k.SWITCH] = 0.0 if params.stiffness_switch == "displacement" else 1.0
+    model[_k.COUPLING] = 0.0 if params.coupling == "one_way" else 1.0
+    model[_k.LOG_EVENTS] = 1.0 if log_events else 0.0
+    return model
+
+
+def _default_drive(params: FeederParameters) -> DriveSchedule:
+    return DriveSchedule(params.drive_frequency_hz, params.drive_amplitude_n)
+
+
+class FeederSimulator:
+    """Stateful exact simulator (sharp model) for the live node: advance in chunks, change live.
+
+    ``FeederSimulator(params, parts, drive=None, initial_x_m=0.0, initial_v_mps=0.0)``; ``drive``
+    defaults to a constant drive at ``params.drive_frequency_hz``/``drive_amplitude_n``. Advancing
+    in chunks gives the same trajectory as one long run to round-off (the state is kept exactly,
+    nothing is re-integrated; each chunk restarts the closed form from the exact state).
+    """
+
+    def __init__(
+        self,
+        params: FeederParameters,
+        parts: Sequence[PartSpec] = (PartSpec(),),
+        drive: DriveSchedule | None = None,
+        initial_x_m: float = 0.0,
+        initial_v_mps: float = 0.0,
+    ) -> None:
+        if params.stiffness_model != "sharp":
+            raise ParameterError(
+                f"stiffness_model={params.stiffness_model!r}: "
+                "FeederSimulator solves the sharp model"
+            )
+        self._initial_params = params
+        self._initial_parts = tuple(parts)
+        self._initial_drive = drive if drive is not None else _default_drive(params)
+        self._initial_xv = (
+            _finite("initial_x_m", initial_x_m),
+            _finite("initial_v_mps", initial_v_mps),
+        )
+        self.reset()
+
+    # -- state ---------------------------------------------------------------------------
+    def reset(self) -> None:
+        """Back to t = 0 with the constructor's parameters, parts, drive and initial state."""
+        self._params = self._initial_params
+        self._drive = self._initial_drive
+        self._model = _model_vector(self._params)
+        self._state = np.zeros(_k.STATE_SIZE)
+        self._state[_k.S_X], self._state[_k.S_V] = self._initial_xv
+        self._pending_events: list[tuple[float, int, int]] = []
+        self._specs: list[PartSpec] = []
+        self._g = _Groups.empty()
+        self._m = _Members.empty()
+        self._state[_k.S_MODE] = self._classify()
+        self._spawn_initial(self._initial_parts)
+
+    @property
+    def time_s(self) -> float:
+        return float(self._state[_k.S_T])
+
+    @property
+    def params(self) -> FeederParameters:
+        return self._params
+
+    @property
+    def drive(self) -> DriveSchedule:
+        return self._drive
+
+    @property
+    def part_count(self) -> int:
+        """Parts ever put on the track (exited ones included; indices are stable)."""
+        return len(self._specs)
+
+    @property
+    def carrier_state(self) -> tuple[float, float, int]:
+        """(x_m, v_mps, branch) now."""
+        return (
+            float(self._state[_k.S_X]),
+            float(self._state[_k.S_V]),
+            int(self._state[_k.S_MODE]),
+        )
+
+    def _drive_now(self) -> tuple[float, float]:
+        seg = self._drive.segments()
+        k = seg.index_at(self.time_s)
+        t = self.time_s
+        phase = seg.phase_rad[k] + seg.omega_rad_s[k] * (t - seg.start_s[k])
+        return (
+            float(seg.amplitude_n[k] * math.sin(phase)),
+            float(seg.amplitude_n[k] * seg.omega_rad_s[k] * math.cos(phase)),
+        )
+
+    def _carrier_mass_and_reaction(self) -> tuple[float, float]:
+        if self._params.coupling == "one_way":
+            return float(self._model[_k.M_ONEWAY]), 0.0
+        mass = float(self._model[_k.M_BASE])
+        reaction = 0.0
+        g = self._g
+        for i in range(g.size):
+            if g.head[i] < 0:
+                continue
+            if g.phase[i] == _k.STICK:
+                mass += g.mass[i]
+            elif g.phase[i] == _k.SLIP_BACKWARD:
+                reaction -= g.mass[i] * g.D[i]
+            else:
+                reaction += g.mass[i] * g.D[i]
+        return mass, reaction
+
+    def _classify(self) -> float:
+        x, v = float(self._state[_k.S_X]), float(self._state[_k.S_V])
+        force, dforce = self._drive_now()
+        mass, reaction = self._carrier_mass_and_reaction()
+        mode = float(self._state[_k.S_MODE]) if self._state[_k.S_MODE] != 0.0 else 1.0
+        return float(
+            _k._classify(
+                int(self._model[_k.SWITCH]),
+                mode,
+                x,
+                v,
+                force,
+                dforce,
+                reaction,
+                mass,
+                float(self._model[_k.K_FWD]),
+                float(self._model[_k.K_BWD]),
+            )
+        )
+
+    # -- parts ---------------------------------------------------------------------------
+    def spawn_part(self, spec: PartSpec) -> int:
+        """Put a part on the track now (sticking, at ``spec.position_m``); returns its index."""
+        mass, mu_s, mu_d = spec.resolved(self._params)
+        kappa_g = self._params.gravity_mps2 * self._params.friction_multiplier
+        L, D = mu_s * kappa_g, mu_d * kappa_g
+        index = len(self._specs)
+        self._specs.append(spec)
+        g = self._g.sticking_group(L, D)
+        if g < 0:
+            g = self._g.add(L, D, float(self._state[_k.S_V]))
+        self._m.add(
+            group=g,
+            offset=spec.position_m - self._g.y[g],
+            mass=mass,
+            slip0=self._g.slip[g],
+            start_t=self.time_s,
+            start_x=spec.position_m + float(self._state[_k.S_X]),
+        )
+        self._g.join(g, index, self._m, mass)
+        return index
+
+    def _spawn_initial(self, specs: Sequence[PartSpec]) -> None:
+        """Put the constructor's parts on the track at t = 0, grouped by friction (vectorised)."""
+        self._specs = list(specs)
+        N = len(specs)
+        if N == 0:
+            return
+        kappa_g = self._params.gravity_mps2 * self._params.friction_multiplier
+        resolved = np.array([spec.resolved(self._params) for spec in specs], dtype=np.float64)
+        mass = resolved[:, 0]
+        friction = resolved[:, 1:] * kappa_g
+        keys, group = np.unique(friction, axis=0, return_inverse=True)
+        group = group.ravel().astype(np.int64)
+        G = keys.shape[0]
+        g = _Groups(G)
+        g.L[:], g.D[:] = keys[:, 0], keys[:, 1]
+        g.u[:] = self._state[_k.S_V]
+        g.mass[:] = np.bincount(group, weights=mass, minlength=G)
+        offset = np.array([spec.position_m for spec in specs], dtype=np.float64)
+        g.lead[:] = -np.inf
+        np.maximum.at(g.lead, group, offset)
+        # linked lists: each member points to the next member of its group
+        nxt = np.full(N, -1, np.int64)
+        order = np.argsort(group, kind="stable")
+        same = group[order][1:] == group[order][:-1]
+        nxt[order[:-1][same]] = order[1:][same]
+        g.head[:] = -1
+        first = np.ones(N, bool)
+        first[1:] = ~same
+        g.head[group[order][first]] = order[first]
+        m = _Members()
+        m.size = N
+        m.group = group
+        m.next = nxt
+        m.offset = offset
+        m.mass = mass.copy()
+        m.slip0 = np.zeros(N)
+        m.exit_t = np.full(N, np.nan)
+        m.start_t = np.zeros(N)
+        m.start_x = offset + self._state[_k.S_X]
+        self._g, self._m = g, m
+
+    def _regroup(self) -> None:
+        """Rebuild groups after friction/mass changes: split mixed groups, merge equal sticking
+        ones."""
+        kappa_g = self._params.gravity_mps2 * self._params.friction_multiplier
+        old, members = self._g, self._m
+        new = _Groups.empty()
+        key_to_group: dict[tuple[int, float, float], int] = {}
+        order = [i for i in range(members.size) if members.group[i] >= 0]
+        for i in order:
+            _, mu_s, mu_d = self._specs[i].resolved(self._params)
+            mass = members.mass[i]
+            L, D = mu_s * kappa_g, mu_d * kappa_g
+            og = int(members.group[i])
+            ph = int(old.phase[og])
+            key = (og, L, D) if ph != _k.STICK else (-1, L, D)
+            ng = key_to_group.get(key, -1)
+            if ng < 0:
+                ng = new.add(L, D, float(old.u[og]))
+                new.phase[ng] = old.phase[og]
+                new.y[ng] = old.y[og]
+                new.slip[ng] = old.slip[og]
+                key_to_group[key] = ng
+            members.offset[i] += old.y[og] - new.y[ng]
+            members.slip0[i] += new.slip[ng] - old.slip[og]
+            members.group[i] = ng
+            new.join(ng, i, members, mass)
+        self._g = new
+
+    def set_part_friction(
+        self, static_friction: float, kinetic_friction: float, part: int | None = None
+    ) -> None:
+        """Change the friction of one part (``part`` index) or of all parts from now on."""
+        mu_s = _finite("static_friction", static_friction, positive=True)
+        mu_d = _finite("kinetic_friction", kinetic_friction, positive=True)
+        if mu_d > mu_s:
+            raise ParameterError(
+                f"kinetic_friction={mu_d!r} must not exceed static_friction={mu_s!r}"
+            )
+        targets = range(len(self._specs)) if part is None else [part]
+        for i in targets:
+            if not 0 <= i < len(self._specs):
+                raise ParameterError(f"part={i!r} is not a part index (0..{len(self._specs) - 1})")
+            self._specs[i] = replace(self._specs[i], static_friction=mu_s, kinetic_friction=mu_d)
+        self._regroup()
+
+    def set_parameters(self, params: FeederParameters) -> None:
+        """Use new parameters from now on (damping, friction, track length, ...); state is kept."""
+        if params.stiffness_model != "sharp":
+            raise ParameterError(
+                f"stiffness_model={params.stiffness_model!r}: "
+                "FeederSimulator solves the sharp model"
+            )
+        self._params = params
+        self._model = _model_vector(params)
+        for i, spec in enumerate(self._specs):
+            mass, _, _ = spec.resolved(params)
+            self._m.mass[i] = mass
+        self._regroup()
+        if self._state[_k.S_MODE] == 0.0 or params.stiffness_switch == "displacement":
+            self._state[_k.S_MODE] = self._classify()
+
+    # -- drive ---------------------------------------------------------------------------
+    def set_drive(
+        self,
+        frequency_hz: float,
+        amplitude_n: float,
+        at_time_s: float | None = None,
+        ramp_s: float = 0.0,
+    ) -> None:
+        """Drive at ``frequency_hz``/``amplitude_n`` from ``at_time_s`` (default: now), ramped over
+        ``ramp_s``; replaces whatever was scheduled from that time on."""
+        at = self.time_s if at_time_s is None else _finite("at_time_s", at_time_s)
+        if at < self.time_s:
+            raise ParameterError(f"at_time_s={at!r} is before the simulator time {self.time_s!r}")
+        self._drive = self._drive.with_change(DriveChange(at, frequency_hz, amplitude_n, ramp_s))
+        if at == self.time_s:
+            self._pending_events.append((at, int(EventKind.DRIVE_CHANGE), -1))
+
+    # -- running -------------------------------------------------------------------------
+    def advance(
+        self, t_end_s: float, sample_times_s: npt.ArrayLike | None = None
+    ) -> SimulationResult:
+        """Advance to ``t_end_s``; samples at ``sample_times_s`` (sorted, in ``[time_s, t_end_s]``).
+
+        Returns the chunk's samples and events; the per-part totals (``part_*_s``/``part_*_m``)
+        cover the simulator's whole life.
+        """
+        t_end = _finite("t_end_s", t_end_s)
+        if t_end < self.time_s:
+            raise ParameterError(
+                f"t_end_s={t_end_s!r} is before the simulator time {self.time_s!r}"
+            )
+        samples = (
+            np.zeros(0)
+            if sample_times_s is None
+            else np.ascontiguousarray(sample_times_s, dtype=np.float64).ravel()
+        )
+        if samples.size:
+            if t_end == self.time_s:
+                raise ParameterError(
+                    f"t_end_s={t_end_s!r} equals the simulator time: nothing to sample"
+                )
+            if not np.all(np.isfinite(samples)):
+                raise ParameterError("sample_times_s contains non-finite values")
+            if np.any(np.diff(samples) < 0.0):
+                raise ParameterError("sample_times_s must be sorted")
+            if samples[0] < self.time_s or samples[-1] > t_end:
+                raise ParameterError(
+                    f"sample_times_s [{samples[0]!r}, {samples[-1]!r}] outside "
+                    f"[{self.time_s!r}, {t_end!r}]"
+                )
+        n, N = samples.size, len(self._specs)
+        t_start = self.time_s
+        out_cx, out_cv, out_ca = np.empty(n), np.empty(n), np.empty(n)
+        out_cb = np.empty(n, np.int8)
+        seg = self._drive.segments()
+        self._state[_k.S_SEG] = seg.index_at(self.time_s)
+        active_groups = int(np.count_nonzero(self._g.head >= 0))
+        chunks: list[tuple[F64, I8, I64]] = []
+        if self._params.coupling == "one_way" and active_groups >= self.parallel_min_groups:
+            # carrier alone first (pieces recorded), then every group along it, in parallel;
+            # the part arrays are column-major there (each group writes its own columns)
+            out_px = np.full((n, N), np.nan, order="F")
+            out_pv = np.full((n, N), np.nan, order="F")
+            out_pp = np.full((n, N), Phase.EXITED, np.int8, order="F")
+            no_groups, no_members = _Groups.empty(), _Members.empty()
+            pieces = self._run_kernel(
+                t_end,
+                samples,
+                (out_cx, out_cv, out_ca, out_cb),
+                no_groups,
+                no_members,
+                chunks,
+                record=True,
+            )
+            self._run_groups(pieces, t_end, samples, out_cx, out_cv, out_px, out_pv, out_pp, chunks)
+            if self._g.has_duplicate_sticking():
+                self._regroup()  # parts of one friction that stick together share a future
+        else:
+            out_px, out_pv = np.empty((n, N)), np.empty((n, N))
+            out_pp = np.empty((n, N), np.int8)
+            self._run_kernel(
+                t_end,
+                samples,
+                (out_cx, out_cv, out_ca, out_cb, out_px, out_pv, out_pp),
+                self._g,
+                self._m,
+                chunks,
+                record=False,
+            )
+        # a logged drive change exactly at the end of the chunk: the kernel stops before it
+        k_end = seg.index_at(t_end)
+        if t_end > t_start and seg.start_s[k_end] == t_end and seg.logged[k_end]:
+            self._pending_events.append((t_end, int(EventKind.DRIVE_CHANGE), -1))
+        if self._pending_events:
+            pt, pk, pp = zip(*self._pending_events, strict=True)
+            chunks.insert(0, (np.array(pt), np.array(pk, np.int8), np.array(pp, np.int64)))
+            self._pending_events = []
+        event_t = np.concatenate([c[0] for c in chunks])
+        event_kind = np.concatenate([c[1] for c in chunks]).astype(np.int8)
+        event_part = np.concatenate([c[2] for c in chunks]).astype(np.int64)
+        order = np.argsort(event_t, kind="stable")
+        return SimulationResult(
+            t_s=samples,
+            carrier_x_m=out_cx,
+            carrier_v_mps=out_cv,
+            carrier_a_mps2=out_ca,
+            branch=out_cb,
+            part_x_m=out_px,
+            part_v_mps=out_pv,
+            part_phase=out_pp,
+            event_t_s=event_t[order],
+            event_kind=event_kind[order],
+            event_part=event_part[order],
+            **self._totals(),
+        )
+
+    #: one-way runs with at least this many distinct groups march the groups in parallel
+    parallel_min_groups: int = 4
+    #: carrier pieces per parallel group pass (bounds the event buffers)
+    pieces_per_pass: int = 512
+
+    def _run_kernel(
+        self,
+        t_end: float,
+        samples: F64,
+        outs: tuple[npt.NDArray[Any], ...],
+        g: _Groups,
+        m: _Members,
+        chunks: list[tuple[F64, I8, I64]],
+        record: bool,
+    ) -> F64:
+        """The event loop of carrier and groups (global kernel); returns the recorded pieces."""
+        n = samples.size
+        if len(outs) == 4:
+            outs = (*outs, np.empty((n, 0)), np.empty((n, 0)), np.empty((n, 0), np.int8))
+        seg = self._drive.segments()
+        cap = 1024 + 8 * (m.size + 1)
+        ev_t, ev_kind, ev_part = np.empty(cap), np.empty(cap, np.int8), np.empty(cap, np.int64)
+        piece_cap = (64 + int(400 * (t_end - self.time_s))) if record else 0
+        pieces = np.empty((piece_cap, _k.PIECE_WIDTH))
+        piece_chunks: list[F64] = []
+        counters = np.zeros(5, np.int64)
+        self._counters = counters
+        while True:
+            status = _k.advance(  # type: ignore[call-arg]
+                self._model,
+                seg.start_s,
+                seg.omega_rad_s,
+                seg.amplitude_n,
+                seg.phase_rad,
+                seg.logged,
+                self._state,
+                g.L,
+                g.D,
+                g.mass,
+                g.u,
+                g.y,
+                g.slip,
+                g.lead,
+                g.phase,
+                g.head,
+                m.group,
+                m.next,
+                m.offset,
+                m.mass,
+                m.slip0,
+                m.exit_t,
+                t_end,
+                samples,
+                *outs,
+                ev_t,
+                ev_kind,
+                ev_part,
+                counters,
+                pieces,
+            )
+            k = int(counters[1])
+            chunks.append((ev_t[:k].copy(), ev_kind[:k].copy(), ev_part[:k].copy()))
+            counters[1] = 0
+            if record:
+                piece_chunks.append(pieces[: int(counters[4])].copy())
+                counters[4] = 0
+            if status == _k.STATUS_BUFFER_FULL:
+                if k == 0:
+                    cap *= 2
+                    ev_t, ev_kind, ev_part = (
+                        np.empty(cap),
+                        np.empty(cap, np.int8),
+                        np.empty(cap, np.int64),
+                    )
+                continue
+            if status != _k.STATUS_DONE:
+                reason = {
+                    _k.STATUS_RESONANCE: "exact resonance of an undamped branch (c = 0, drive "
+                    "frequency equal to a branch natural frequency): no bounded closed form",
+                    _k.STATUS_STUCK: "an event repeats at one instant without progress",
+                }.get(status, f"status {status}")
+                raise SimulationError(f"sharp solver stopped at t={self.time_s!r} s: {reason}")
+            break
+        if not record:
+            return np.empty((0, _k.PIECE_WIDTH))
+        return np.concatenate(piece_chunks) if piece_chunks else pieces[:0]
+
+    def _run_groups(
+        self,
+        pieces: F64,
+        t_end: float,
+        samples: F64,
+        out_cx: F64,
+        out_cv: F64,
+        out_px: F64,
+        out_pv: F64,
+        out_pp: I8,
+        chunks: list[tuple[F64, I8, I64]],
+    ) -> None:
+        """March every group along the recorded carrier pieces (one-way coupling), in parallel."""
+        g, m = self._g, self._m
+        G = g.size
+        track = float(self._model[_k.TRACK])
+        n_total = pieces.shape[0]
+        for k0 in range(0, max(n_total, 1), self.pieces_per_pass):
+            batch = np.ascontiguousarray(pieces[k0 : k0 + self.pieces_per_pass])
+            nb = batch.shape[0]
+            final = k0 + nb >= n_total
+            t_stop = t_end if final else float(pieces[k0 + nb, _k.P_T0])
+            ns0 = int(np.searchsorted(samples, batch[0, _k.P_T0], side="left")) if nb else 0
+            members_before = m.group.copy()
+            saved = (g.copy(), m.copy())
+            cap = 16 + 4 * nb
+            while True:
+                ev_t = np.empty((G, cap))
+                ev_kind = np.empty((G, cap), np.int8)
+                ev_part = np.empty((G, cap), np.int64)
+                ev_n = np.zeros(G, np.int64)
+                status = np.full(G, -1, np.int64)
+                _k.advance_groups(
+                    batch, nb, track, t_stop, samples, ns0, out_cx, out_cv,
+                    g.L, g.D, g.mass, g.u, g.y, g.slip, g.lead, g.phase, g.head,
+                    m.group, m.next, m.offset, m.mass, m.slip0, m.exit_t,
+                    out_px, out_pv, out_pp, ev_t, ev_kind, ev_part, ev_n, status,
+                )  # fmt: skip
+                if np.any(status[saved[0].head >= 0] == _k.STATUS_BUFFER_FULL):
+                    g.restore(saved[0])
+                    m.restore(saved[1])
+                    cap *= 2
+                    continue
+                bad = np.flatnonzero((status != _k.STATUS_DONE) & (status != -1))
+                if bad.size:
+                    raise SimulationError(
+                        f"sharp solver (groups {bad.tolist()}) stopped: an event repeats at "
+                        "one instant without progress"
+                    )
+                break
+            chunks.append(_expand_group_events(ev_t, ev_kind, ev_part, ev_n, members_before, m))
+            if final:
+                break
+
+    def _totals(self) -> dict[str, F64]:
+        m, g = self._m, self._g
+        N = m.size
+        end_t = np.full(N, self.time_s)
+        end_x = np.empty(N)
+        slip = np.empty(N)
+        for i in range(N):
+            gi = int(m.group[i])
+            if gi >= 0:
+                end_x[i] = m.offset[i] + g.y[gi] + self._state[_k.S_X]
+                slip[i] = g.slip[gi] - m.slip0[i]
+            else:
+                end_t[i] = m.exit_t[i]
+                end_x[i] = m.offset[i]
+                slip[i] = m.slip0[i]
+        return {
+            "part_start_t_s": m.start_t[:N].copy(),
+            "part_start_x_m": m.start_x[:N].copy(),
+            "part_end_t_s": end_t,
+            "part_end_x_m": end_x,
+            "part_slip_time_s": slip,
+            "part_exit_t_s": m.exit_t[:N].copy(),
+        }
+
+
+class _Groups:
+    """Group arrays handed to the kernel (parts of one friction sharing one velocity history)."""
+
+    def __init__(self, size: int) -> None:
+        self.size = size
+        self.L = np.zeros(size)
+        self.D = np.zeros(size)
+        self.mass = np.zeros(size)
+        self.u = np.zeros(size)
+        self.y = np.zeros(size)
+        self.slip = np.zeros(size)
+        self.lead = np.full(size, -np.inf)
+        self.phase = np.zeros(size, np.int8)
+        self.head = np.full(size, -1, np.int64)
+
+    @classmethod
+    def empty(cls) -> _Groups:
+        return cls(0)
+
+    _FIELDS = ("L", "D", "mass", "u", "y", "slip", "lead", "phase", "head")
+
+    def copy(self) -> _Groups:
+        other = _Groups(0)
+        other.size = self.size
+        for name in self._FIELDS:
+            setattr(other, name, getattr(self, name).copy())
+        return other
+
+    def restore(self, saved: _Groups) -> None:
+        """Copy ``saved`` back into these arrays (in place: the kernel holds them)."""
+        for name in self._FIELDS:
+            getattr(self, name)[...] = getattr(saved, name)
+
+    def sticking_group(self, L: float, D: float) -> int:
+        """Index of an active sticking group with this friction, or -1."""
+        hits = np.flatnonzero(
+            (self.head >= 0) & (self.phase == _k.STICK) & (self.L == L) & (self.D == D)
+        )
+        return int(hits[0]) if hits.size else -1
+
+    def has_duplicate_sticking(self) -> bool:
+        """Whether two active sticking groups have the same friction (they could be merged)."""
+        live = (self.head >= 0) & (self.phase == _k.STICK)
+        pairs = np.stack([self.L[live], self.D[live]], axis=1)
+        return bool(pairs.shape[0] > np.unique(pairs, axis=0).shape[0])
+
+    def add(self, L: float, D: float, u: float) -> int:
+        i = self.size
+        for name in ("L", "D", "mass", "u", "y", "slip", "lead", "phase", "head"):
+            arr = getattr(self, name)
+            fill = -np.inf if name == "lead" else (-1 if name == "head" else 0)
+            setattr(self, name, np.concatenate([arr, np.full(1, fill, arr.dtype)]))
+        self.size += 1
+        self.L[i], self.D[i], self.u[i] = L, D, u
+        return i
+
+    def join(self, g: int, member: int, members: _Members, mass: float) -> None:
+        members.next[member] = self.head[g]
+        self.head[g] = member
+        self.mass[g] += mass
+        self.lead[g] = max(self.lead[g], members.offset[member])
+
+
+class _Members:
+    """Per-part arrays handed to the kernel."""
+
+    def __init__(self) -> None:
+        self.size = 0
+        self.group = np.zeros(0, np.int64)
+        self.next = np.zeros(0, np.int64)
+        self.offset = np.zeros(0)
+        self.mass = np.zeros(0)
+        self.slip0 = np.zeros(0)
+        self.exit_t = np.zeros(0)
+        self.start_t = np.zeros(0)
+        self.start_x = np.zeros(0)
+
+    @classmethod
+    def empty(cls) -> _Members:
+        return cls()
+
+    _FIELDS = ("group", "next", "offset", "mass", "slip0", "exit_t", "start_t", "start_x")
+
+    def copy(self) -> _Members:
+        other = _Members()
+        other.size = self.size
+        for name in self._FIELDS:
+            setattr(other, name, getattr(self, name).copy())
+        return other
+
+    def restore(self, saved: _Members) -> None:
+        for name in self._FIELDS:
+            getattr(self, name)[...] = getattr(saved, name)
+
+    def add(
+        self, group: int, offset: float, mass: float, slip0: float, start_t: float, start_x: float
+    ) -> None:
+        values = {
+            "group": group,
+            "next": -1,
+            "offset": offset,
+            "mass": mass,
+            "slip0": slip0,
+            "exit_t": np.nan,
+            "start_t": start_t,
+            "start_x": start_x,
+        }
+        for name, value in values.items():
+            arr = getattr(self, name)
+            setattr(self, name, np.concatenate([arr, np.full(1, value, arr.dtype)]))
+        self.size += 1
+
+
+def _expand_group_events(
+    ev_t: F64,
+    ev_kind: I8,
+    ev_part: I64,
+    ev_n: I64,
+    members_before: I64,
+    m: _Members,
+) -> tuple[F64, I8, I64]:
+    """Per-group event rows -> one event per member (group events) or the member itself (exits)."""
+    G, cap = ev_t.shape
+    valid = np.arange(cap)[None, :] < ev_n[:, None]
+    e_group = np.broadcast_to(np.arange(G)[:, None], (G, cap))[valid]
+    e_t, e_kind, e_part = ev_t[valid], ev_kind[valid], ev_part[valid]
+    own = e_part >= 0
+    # members of each group at the start of the pass, ordered by group
+    mem = np.flatnonzero(members_before >= 0)
+    order = np.argsort(members_before[mem], kind="stable")
+    mem_sorted = mem[order]
+    counts = np.bincount(members_before[mem], minlength=G)
+    starts = np.concatenate([[0], np.cumsum(counts)[:-1]])
+    grp = ~own
+    rep = counts[e_group[grp]]
+    total = int(rep.sum())
+    offsets = np.arange(total) - np.repeat(np.cumsum(rep) - rep, rep)
+    who = mem_sorted[np.repeat(starts[e_group[grp]], rep) + offsets]
+    t_rep = np.repeat(e_t[grp], rep)
+    k_rep = np.repeat(e_kind[grp], rep)
+    gone = m.exit_t[who]
+    keep = ~(gone <= t_rep)
+    return (
+        np.concatenate([t_rep[keep], e_t[own]]),
+        np.concatenate([k_rep[keep], e_kind[own]]).astype(np.int8),
+        np.concatenate([who[keep], e_part[own]]).astype(np.int64),
+    )
+
+
+# -- one-shot entry points -----------------------------------------------------------------
+def _sample_times(duration_s: float, output_rate_hz: float) -> F64:
+    duration = _finite("duration_s", duration_s, positive=True)
+    rate = _finite("output_rate_hz", output_rate_hz, positive=True)
+    n = math.floor(duration * rate * (1.0 + 1e-12))
+    return np.arange(n + 1, dtype=np.float64) / rate
+
+
+def simulate(
+    params: FeederParameters,
+    duration_s: float,
+    output_rate_hz: float,
+    parts: Sequence[PartSpec] = (PartSpec(),),
+    drive: DriveSchedule | None = None,
+) -> SimulationResult:
+    """Simulate from rest for ``duration_s``; samples at ``k/output_rate_hz`` for k = 0, 1, ...
+
+    Sharp model: exact event-driven solution. ``params.stiffness_model == "logistic"``: delegated to
+    :func:`feeder_ros.physics.smooth_model.simulate_smooth` (an ODE solver on Eq. 6 + Eq. 9).
+    """
+    samples = _sample_times(duration_s, output_rate_hz)
+    if params.stiffness_model == "logistic":
+        from feeder_ros.physics.smooth_model import simulate_smooth
+
+        result: SimulationResult = simulate_smooth(params, duration_s, output_rate_hz, parts, drive)
+        return result
+    sim = FeederSimulator(params, parts, drive)
+    return sim.advance(float(duration_s), samples)
+
+
+def simulate_carrier(
+    params: FeederParameters,
+    duration_s: float,
+    output_rate_hz: float,
+    drive: DriveSchedule | None = None,
+) -> SimulationResult:
+    """The carrier alone (no parts; with two-way coupling its mass is then ``M + alpha*m``)."""
+    return simulate(params, duration_s, output_rate_hz, (), drive)
+
+
+def simulate_parts(
+    params: FeederParameters,
+    duration_s: float,
+    output_rate_hz: float,
+    parts: Sequence[PartSpec] = (PartSpec(),),
+    drive: DriveSchedule | None = None,
+) -> SimulationResult:
+    """Parts on the exact one-way carrier trajectory (``coupling`` forced to ``one_way``)."""
+    return simulate(
+        params.with_changes(coupling="one_way"), duration_s, output_rate_hz, parts, drive
+    )
+
+
+def simulate_many(
+    points: Sequence[FeederParameters | tuple[FeederParameters, DriveSchedule | None]],
+    duration_s: float,
+    part: PartSpec = PartSpec(),
+) -> ManySummary:
+    """Many operating points (carrier + one part each, sharp model), in parallel on all cores.
+
+    Each point is ``params`` or ``(params, drive)``; the part starts at ``part.position_m``.
+    Returns the part's exact mean speed and slip fraction over ``duration_s`` (up to its exit if
+    it leaves the track).
+    """
+    duration = _finite("duration_s", duration_s, positive=True)
+    P = len(points)
+    models = np.zeros((P, _k.MODEL_SIZE))
+    states = np.zeros((P, _k.STATE_SIZE))
+    g_L, g_D, g_mass = np.zeros(P), np.zeros(P), np.zeros(P)
+    offsets = np.zeros(P + 1, np.int64)
+    starts, omegas, amps, phases, logged = [], [], [], [], []
+    for p, point in enumerate(points):
+        params, drive = point if isinstance(point, tuple) else (point, None)
+        if params.stiffness_model != "sharp":
+            raise ParameterError(
+                f"point {p}: stiffness_model={params.stiffness_model!r}; "
+                "simulate_many is sharp only"
+            )
+        seg = (drive if drive is not None else _default_drive(params)).segments()
+        models[p] = _model_vector(params, log_events=False)
+        mass, mu_s, mu_d = part.resolved(params)
+        kg = params.gravity_mps2 * params.friction_multiplier
+        g_L[p], g_D[p], g_mass[p] = mu_s * kg, mu_d * kg, mass
+        model_track = models[p, _k.TRACK]
+        models[p, _k.TRACK] = model_track - part.position_m
+        states[p, _k.S_MODE] = 1.0
+        starts.append(seg.start_s)
+        omegas.append(seg.omega_rad_s)
+        amps.append(seg.amplitude_n)
+        phases.append(seg.phase_rad)
+        logged.append(seg.logged)
+        offsets[p + 1] = offsets[p] + seg.start_s.size
+    results = np.zeros((P, 5))
+    _k.advance_many(
+        models,
+        np.concatenate(starts) if P else np.zeros(0),
+        np.concatenate(omegas) if P else np.zeros(0),
+        np.concatenate(amps) if P else np.zeros(0),
+        np.concatenate(phases) if P else np.zeros(0),
+        np.concatenate(logged) if P else np.zeros(0, np.int8),
+        offsets,
+        states,
+        g_L,
+        g_D,
+        g_mass,
+        np.full(P, duration),
+        results,
+    )
+    bad = np.flatnonzero(results[:, 0] != _k.STATUS_DONE)
+    if bad.size:
+        raise SimulationError(f"sharp solver failed at points {bad.tolist()} (status codes)")
+    exit_t = results[:, 3]
+    span = np.where(np.isfinite(exit_t), exit_t, duration)
+    # displacement of an exited part: track end reached at exit (lab position stored by the kernel)
+    disp = results[:, 1]
+    return ManySummary(
+        mean_part_speed_mps=disp / span,
+        slip_fraction=results[:, 2] / span,
+        exit_t_s=exit_t,
+    )

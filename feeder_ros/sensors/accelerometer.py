@@ -1,0 +1,56 @@
+"""A MEMS accelerometer on the carrier: white noise, bias, saturation, seedable.
+
+Axis x is along the track (the carrier's motion), z is up (the sensor measures specific force, so
+at rest it reads +g on z). Noise is white with one-sided density ``noise_density`` [m/s^2/sqrt(Hz)]
+over the Nyquist band, so each sample has standard deviation ``noise_density*sqrt(rate_hz/2)``.
+"""
+
+from __future__ import annotations
+
+import math
+
+import numpy as np
+import numpy.typing as npt
+
+from feeder_ros.physics.parameters import ParameterError
+
+__all__ = ["AccelerometerModel"]
+
+
+class AccelerometerModel:
+    def __init__(
+        self,
+        rate_hz: float,
+        noise_density: float = 0.0,
+        bias: float = 0.0,
+        saturation: float = math.inf,
+        gravity: float = 9.81,
+        seed: int = 0,
+    ) -> None:
+        checks = {
+            "rate_hz": (rate_hz, rate_hz > 0.0),
+            "noise_density": (noise_density, noise_density >= 0.0),
+            "bias": (bias, True),
+            "saturation": (saturation, saturation > 0.0),
+            "gravity": (gravity, True),
+        }
+        for name, (value, ok) in checks.items():
+            if math.isnan(value) or not ok or (name != "saturation" and math.isinf(value)):
+                raise ParameterError(f"accelerometer {name}={value!r} is out of range")
+        self.rate_hz = rate_hz
+        self.sigma = noise_density * math.sqrt(rate_hz / 2.0)
+        self.bias = bias
+        self.saturation = saturation
+        self.gravity = gravity
+        self._rng = np.random.default_rng(seed)
+
+    def measure(self, along_track_mps2: npt.ArrayLike) -> npt.NDArray[np.float64]:
+        """Readings (n, 3) [m/s^2] for true carrier accelerations along the track (n,)."""
+        a = np.asarray(along_track_mps2, dtype=np.float64)
+        readings = np.zeros((a.size, 3))
+        readings[:, 0] = a + self.bias
+        readings[:, 2] = self.gravity
+        if self.sigma > 0.0:
+            readings += self._rng.normal(0.0, self.sigma, readings.shape)
+        np.clip(readings, -self.saturation, self.saturation, out=readings)
+        return readings

@@ -1,0 +1,46 @@
+"""The benchmark script still runs (``--quick``); its timings are not checked here."""
+
+from __future__ import annotations
+
+import subprocess
+import sys
+from pathlib import Path
+
+REPO = Path(__file__).resolve().parents[2]
+
+
+def test_benchmark_quick_run_writes_its_report(tmp_path: Path) -> None:
+    report = tmp_path / "bench.md"
+    completed = subprocess.run(
+        [
+            sys.executable,
+            str(REPO / "bench" / "bench_physics.py"),
+            "--quick",
+            "--output",
+            str(report),
+        ],
+        capture_output=True,
+        text=True,
+        timeout=600,
+        check=False,
+    )
+    assert completed.returncode == 0, completed.stderr[-2000:]
+    text = report.read_text(encoding="utf-8")
+    assert text.startswith("### Physics core benchmark (--quick")
+    for row in (
+        "| exact engine (sharp) |",
+        "| RK45, ode45 defaults (logistic), carrier only: baseline |",
+        "| RK45, ode45 defaults (logistic) |",
+        "| RK45, max step 1 ms (logistic) |",
+        "| DOP853, rtol 1e-12 (sharp, carrier only): reference |",
+        "| one part type |",
+        "| all-distinct frictions |",
+        "Fig. 9-style sweep",
+    ):
+        assert row in text
+    # the engine agrees with the DOP853 reference to round-off in every case table
+    engine_rows = [line for line in text.splitlines() if line.startswith("| exact engine")]
+    assert len(engine_rows) == 2
+    for line in engine_rows:
+        error = float(line.split("|")[5])
+        assert error < 1e-9

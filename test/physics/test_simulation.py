@@ -1,0 +1,189 @@
+"""Public API of the sharp simulator: shapes, totals, exits, live changes, batch runs, refusals."""
+
+from __future__ import annotations
+
+import math
+
+import numpy as np
+import pytest
+
+from feeder_ros.physics.drive import DriveSchedule
+from feeder_ros.physics.parameters import FeederParameters, ParameterError
+from feeder_ros.physics.simulation import (
+    EventKind,
+    FeederSimulator,
+    PartSpec,
+    Phase,
+    simulate,
+    simulate_carrier,
+    simulate_many,
+    simulate_parts,
+)
+
+
+def test_result_shapes_and_sample_times(case_study: FeederParameters) -> None:
+    run = simulate(case_study, 0.5, 1000.0, (PartSpec(), PartSpec(0.1), PartSpec(0.2)))
+    assert run.t_s.shape == (501,)
+    np.testing.assert_array_equal(run.t_s, np.arange(501) / 1000.0)
+    assert run.part_x_m.shape == run.part_v_mps.shape == run.part_phase.shape == (501, 3)
+    assert run.branch.dtype == np.int8
+    assert run.part_phase.dtype == np.int8
+    assert run.event_t_s.shape == run.event_kind.shape == run.event_part.shape
+    assert np.all(np.diff(run.event_t_s) >= 0.0)
+    assert run.carrier_x_m[0] == 0.0
+    assert run.carrier_v_mps[0] == 0.0
+    assert run.branch[1] == 1  # the first branch is the forward one
+
+
+def test_exact_totals_agree_with_the_samples(case_study: FeederParameters) -> None:
+    run = simulate(case_study, 2.0, 20_000.0)
+    speed = (run.part_x_m[-1, 0] - run.part_x_m[0, 0]) / 2.0
+    assert run.mean_part_speed_mps()[0] == pytest.approx(speed, rel=1e-12)
+    sampled = np.mean(run.part_phase[:-1, 0] != Phase.STICK)
+    assert run.slip_fraction()[0] == pytest.approx(sampled, abs=2e-3)
+    assert 0.0 < run.slip_fraction()[0] < 1.0
+
+
+def test_parts_of_one_friction_sticking_together_share_their_velocity(
+    case_study: FeederParameters,
+) -> None:
+    parts = [PartSpec(0.0), PartSpec(0.05), PartSpec(0.1, static_friction=0.25)]
+    run = simulate(case_study, 1.0, 1000.0, parts)
+    np.testing.assert_array_equal(run.part_v_mps[:, 0], run.part_v_mps[:, 1])
+    np.testing.assert_allclose(run.part_x_m[:, 1] - run.part_x_m[:, 0], 0.05, atol=1e-14)
+    assert not np.array_equal(run.part_v_mps[:, 0], run.part_v_mps[:, 2])
+    # one event per part for a group event
+    starts = run.event_part[run.event_kind == EventKind.SLIP_START]
+    assert np.count_nonzero(starts == 0) == np.count_nonzero(starts == 1)
+
+
+def test_parts_leave_at_the_track_end_in_order() -> None:
+    params = FeederParameters(drive_amplitude_n=40.0, drive_frequency_hz=20.0, track_length_m=0.004)
+    probe = simulate(params.with_changes(track_length_m=10.0), 2.0, 100.0)
+    speed = probe.mean_part_speed_mps()[0]
+    assert abs(speed) > 1e-3, "this operating point moves parts"
+    if speed < 0:
+        pytest.skip("operating point moves parts backward")
+    parts = [PartSpec(0.003), PartSpec(0.0), PartSpec(0.0015)]
+    run = simulate(params, 2.0, 1000.0, parts)
+    exits = run.event_part[run.event_kind == EventKind.PART_EXIT]
+    assert exits.tolist() == [0, 2, 1]
+    assert run.exited_count() == 3
+    last = run.part_phase[-1]
+    assert np.all(last == Phase.EXITED)
+    assert np.all(np.isnan(run.part_x_m[-1]))
+    # the exit happens while slipping, at the track end
+    for i in range(3):
+        t_exit = run.part_exit_t_s[i]
+        assert run.part_end_x_m[i] == pytest.approx(
+            0.004 + np.interp(t_exit, run.t_s, run.carrier_x_m), abs=1e-5
+        )
+
+
+def test_spawn_friction_and_parameter_changes_live(case_study: FeederParameters) -> None:
+    sim = FeederSimulator(case_study, ())
+    sim.advance(0.2)
+    index = sim.spawn_part(PartSpec(0.01))
+    assert index == 0
+    chunk = sim.advance(0.4, [0.2, 0.3, 0.4])
+    assert chunk.part_x_m.shape == (3, 1)
+    assert chunk.part_x_m[0, 0] == pytest.approx(0.01 + chunk.carrier_x_m[0], abs=1e-15)
+    sim.set_part_friction(0.9, 0.8)
+    sticky = sim.advance(0.6, np.linspace(0.4, 0.6, 201))
+    # a part slipping at the change finishes its slip, then sticks for good (mu_s*g = 8.8 > |a|)
+    first_stick = int(np.argmax(sticky.part_phase[:, 0] == Phase.STICK))
+    assert first_stick < 100
+    assert np.all(sticky.part_phase[first_stick:] == Phase.STICK)
+    sim.set_parameters(case_study.with_changes(damping_ns_per_m=500.0))
+    damped = sim.advance(3.0, [3.0])
+    assert abs(damped.carrier_x_m[0]) < 1e-3
+    sim.set_drive(40.0, 0.0, ramp_s=0.1)
+    assert sim.drive.values_at(sim.time_s + 0.2) == (40.0, 0.0)
+    sim.reset()
+    assert sim.time_s == 0.0
+    assert sim.part_count == 0
+
+
+def test_set_drive_schedules_a_phase_continuous_change(case_study: FeederParameters) -> None:
+    sim = FeederSimulator(case_study)
+    sim.advance(0.1)
+    sim.set_drive(50.0, 20.0, at_time_s=0.15)
+    run = sim.advance(0.2, [0.2])
+    assert run.event_t_s[run.event_kind == EventKind.DRIVE_CHANGE].tolist() == [0.15]
+    with pytest.raises(ParameterError, match=r"at_time_s=0\.1"):
+        sim.set_drive(30.0, 1.0, at_time_s=0.1)
+
+
+def test_simulate_many_agrees_with_single_runs() -> None:
+    points = [
+        FeederParameters(drive_amplitude_n=a, drive_frequency_hz=f, damping_ns_per_m=10.0)
+        for a, f in [(40.0, 29.6), (20.0, 45.0), (0.4, 29.6)]
+    ]
+    drive = DriveSchedule(35.0, 30.0)
+    summary = simulate_many([*points, (points[0], drive)], 2.0)
+    singles = [simulate(p, 2.0, 10.0) for p in points]
+    singles.append(simulate(points[0], 2.0, 10.0, drive=drive))
+    for j, run in enumerate(singles):
+        assert summary.mean_part_speed_mps[j] == pytest.approx(
+            run.mean_part_speed_mps()[0], rel=1e-9, abs=1e-15
+        )
+        assert summary.slip_fraction[j] == pytest.approx(run.slip_fraction()[0], abs=1e-12)
+    assert summary.slip_fraction[2] == 0.0
+
+
+def test_carrier_only_and_parts_helpers(case_study: FeederParameters) -> None:
+    heavy = case_study.with_changes(part_mass_kg=2.0)
+    carrier = simulate_carrier(heavy, 0.2, 1000.0)
+    assert carrier.part_x_m.shape == (201, 0)
+    parts = simulate_parts(heavy.with_changes(coupling="two_way"), 0.2, 1000.0)
+    np.testing.assert_allclose(parts.carrier_x_m, carrier.carrier_x_m, rtol=0, atol=1e-15)
+
+
+@pytest.mark.parametrize(
+    ("call", "needle"),
+    [
+        (lambda p: simulate(p, math.nan, 1000.0), "duration_s=nan"),
+        (lambda p: simulate(p, 1.0, -5.0), "output_rate_hz=-5.0"),
+        (lambda p: simulate(p, 1.0, 0.0), "output_rate_hz=0.0"),
+        (lambda p: simulate(p, -1.0, 10.0), "duration_s=-1.0"),
+        (lambda p: PartSpec(static_friction=0.1, kinetic_friction=0.2), "kinetic_friction=0.2"),
+        (
+            lambda p: simulate(p, 1.0, 10.0, (PartSpec(kinetic_friction=0.5),)),
+            "kinetic_friction=0.5",
+        ),
+        (lambda p: PartSpec(mass_kg=-1.0), "mass_kg=-1.0"),
+        (lambda p: FeederSimulator(p).advance(math.inf), "t_end_s=inf"),
+        (lambda p: FeederSimulator(p).advance(1.0, [0.5, 0.2]), "sorted"),
+    ],
+)
+def test_bad_input_is_refused_with_the_value_named(
+    call: object, needle: str, case_study: FeederParameters
+) -> None:
+    assert callable(call)
+    with pytest.raises(ParameterError, match=needle):
+        call(case_study)
+
+
+def test_parallel_group_march_equals_the_global_event_loop() -> None:
+    params = FeederParameters(drive_amplitude_n=40.0, track_length_m=0.003)
+    rng = np.random.default_rng(11)
+    specs = [
+        PartSpec(position_m=float(x), static_friction=float(mu), kinetic_friction=float(mu) / 2)
+        for x, mu in zip(rng.uniform(0, 0.002, 8), rng.choice([0.15, 0.2, 0.25], 8), strict=True)
+    ]
+    times = np.arange(2001) / 1000.0
+    serial = FeederSimulator(params, specs)
+    serial.parallel_min_groups = 10**9
+    one = serial.advance(2.0, times)
+    parallel = FeederSimulator(params, specs)
+    parallel.parallel_min_groups = 1
+    parallel.pieces_per_pass = 7  # many passes
+    two = parallel.advance(2.0, times)
+    assert one.exited_count() == two.exited_count() > 0
+    np.testing.assert_array_equal(one.part_phase, two.part_phase)
+    np.testing.assert_allclose(two.part_x_m, one.part_x_m, rtol=0, atol=1e-13)
+    np.testing.assert_allclose(two.part_slip_time_s, one.part_slip_time_s, rtol=0, atol=1e-12)
+    a = np.lexsort((one.event_part, one.event_kind, one.event_t_s))
+    b = np.lexsort((two.event_part, two.event_kind, two.event_t_s))
+    np.testing.assert_array_equal(one.event_part[a], two.event_part[b])
+    np.testing.assert_allclose(one.event_t_s[a], two.event_t_s[b], rtol=0, atol=1e-11)

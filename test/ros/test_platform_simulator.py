@@ -1,0 +1,181 @@
+"""The platform simulator as a real process over DDS: drive in, IMU and state out, parameters."""
+
+from __future__ import annotations
+
+import sys
+import time
+from pathlib import Path
+
+import numpy as np
+from rcl_interfaces.msg import Parameter as ParameterMsg
+from rcl_interfaces.msg import ParameterType, ParameterValue
+from rcl_interfaces.srv import GetParameters, SetParameters
+from rclpy.qos import QoSProfile, ReliabilityPolicy
+from rclpy.time import Time
+from ros_test_tools import call, probe_node, running, wait_until
+from rosgraph_msgs.msg import Clock as ClockMessage
+from sensor_msgs.msg import Imu
+from std_srvs.srv import Trigger
+
+from feeder_ros.msg import CarrierState, DriveCommand, PartStateArray
+from feeder_ros.srv import SpawnParts
+
+SIMULATOR = str(Path(sys.executable).parent / "platform_simulator")
+RELIABLE = QoSProfile(depth=1000, reliability=ReliabilityPolicy.RELIABLE)
+BEST_EFFORT = QoSProfile(depth=1000, reliability=ReliabilityPolicy.BEST_EFFORT)
+
+
+def _double(name: str, value: float) -> ParameterMsg:
+    return ParameterMsg(
+        name=name, value=ParameterValue(type=ParameterType.PARAMETER_DOUBLE, double_value=value)
+    )
+
+
+def test_drive_command_makes_the_carrier_vibrate_at_the_drive_frequency() -> None:
+    ns = "/sim_drive"
+    command = [
+        SIMULATOR, "--ros-args", "-r", f"__ns:={ns}",
+        "-p", "damping_ns_per_m:=200.0", "-p", "imu_noise_density_mps2_per_sqrt_hz:=0.002",
+        "-p", "imu_rate_hz:=500.0", "-p", "state_rate_hz:=250.0",
+    ]  # fmt: skip
+    with running(command) as process, probe_node() as node:
+        imu: list[Imu] = []
+        states: list[CarrierState] = []
+        node.create_subscription(Imu, f"{ns}/imu", imu.append, BEST_EFFORT)
+        node.create_subscription(CarrierState, f"{ns}/carrier/state", states.append, RELIABLE)
+        publisher = node.create_publisher(DriveCommand, f"{ns}/drive/command", 10)
+
+        assert wait_until(lambda: len(imu) > 50, 20.0), process.poll()
+
+        def command() -> None:
+            message = DriveCommand(enabled=True, frequency_hz=31.0, amplitude_n=40.0)
+            message.header.stamp = node.get_clock().now().to_msg()
+            publisher.publish(message)
+
+        def driven() -> bool:
+            command()
+            return bool(states) and states[-1].drive_amplitude_n == 40.0
+
+        assert wait_until(driven, 10.0), "the drive command never took effect"
+        start = time.monotonic()
+        while time.monotonic() - start < 3.0:  # settle and record, refreshing the command
+            command()
+            time.sleep(0.05)
+        stamps = np.array([Time.from_msg(m.header.stamp).nanoseconds for m in imu])
+        steps = np.diff(stamps)
+        assert np.all(steps > 0), "IMU stamps not strictly increasing"
+        assert np.all(steps % 2_000_000 == 0), "IMU samples off the 500 Hz grid"
+        # best effort: a busy probe may drop some, but what arrives is on the grid
+        assert (steps == 2_000_000).mean() > 0.95, "too many IMU samples lost on loopback"
+        state_stamps = np.array([Time.from_msg(m.header.stamp).nanoseconds for m in states])
+        assert np.all(np.diff(state_stamps) == 4_000_000), "state samples skipped or duplicated"
+
+        x = np.array([m.linear_acceleration.x for m in imu[-1000:]])
+        assert np.ptp(x) > 1.0, "carrier does not respond to the drive"
+        assert np.all(np.diff(stamps[-1000:]) == 2_000_000), "the spectrum needs a gapless window"
+        spectrum = np.abs(np.fft.rfft(x - x.mean()))
+        peak_hz = np.fft.rfftfreq(x.size, 2e-3)[np.argmax(spectrum)]
+        assert abs(peak_hz - 31.0) <= 1.0, peak_hz
+        assert abs(np.mean([m.linear_acceleration.z for m in imu]) - 9.81) < 0.05
+
+        last = states[-1]
+        assert last.drive_frequency_hz == 31.0
+        assert last.drive_amplitude_n == 40.0
+        assert last.stiffness_branch in (CarrierState.BRANCH_FORWARD, CarrierState.BRANCH_BACKWARD)
+        branches = {s.stiffness_branch for s in states[-500:]}
+        assert branches == {1, -1}, "the carrier should switch stiffness every cycle"
+
+        # commands stop: after command_timeout_s the drive is treated as stopped
+        deadline = time.monotonic() + 4.0
+        while time.monotonic() < deadline and states[-1].drive_amplitude_n != 0.0:
+            time.sleep(0.05)
+        assert states[-1].drive_amplitude_n == 0.0, "stale command was not treated as stop"
+    assert process.returncode == 0
+
+
+def test_parameters_are_validated_and_applied_live() -> None:
+    ns = "/sim_params"
+    with running([SIMULATOR, "--ros-args", "-r", f"__ns:={ns}"]), probe_node() as node:
+        name = f"{ns}/platform_simulator/set_parameters"
+        refused = call(
+            node, SetParameters, name,
+            SetParameters.Request(parameters=[_double("static_friction", 0.05)]),
+        ).results[0]  # fmt: skip
+        assert not refused.successful
+        assert "kinetic_friction=0.1 must not exceed static_friction=0.05" in refused.reason
+        refused = call(
+            node, SetParameters, name,
+            SetParameters.Request(parameters=[_double("damping_ns_per_m", float("nan"))]),
+        ).results[0]  # fmt: skip
+        assert not refused.successful
+        assert "damping_ns_per_m" in refused.reason
+        read_only = call(
+            node, SetParameters, name,
+            SetParameters.Request(parameters=[_double("imu_rate_hz", 200.0)]),
+        ).results[0]  # fmt: skip
+        assert not read_only.successful
+        accepted = call(
+            node, SetParameters, name,
+            SetParameters.Request(parameters=[_double("static_friction", 0.3)]),
+        ).results[0]  # fmt: skip
+        assert accepted.successful, accepted.reason
+        values = call(
+            node, GetParameters, f"{ns}/platform_simulator/get_parameters",
+            GetParameters.Request(names=["static_friction", "kinetic_friction"]),
+        ).values  # fmt: skip
+        assert [v.double_value for v in values] == [0.3, 0.1]
+
+
+def test_spawn_and_reset_services_and_part_states() -> None:
+    ns = "/sim_parts"
+    with running([SIMULATOR, "--ros-args", "-r", f"__ns:={ns}"]), probe_node() as node:
+        parts: list[PartStateArray] = []
+        node.create_subscription(PartStateArray, f"{ns}/parts/state", parts.append, RELIABLE)
+        base = f"{ns}/platform_simulator"
+        bad = call(node, SpawnParts, f"{base}/spawn_parts", SpawnParts.Request(count=0))
+        assert not bad.success
+        assert "count=0" in bad.message
+        too_far = SpawnParts.Request(count=3, position_m=0.49, spacing_m=0.1)
+        assert not call(node, SpawnParts, f"{base}/spawn_parts", too_far).success
+        good = SpawnParts.Request(count=3, position_m=0.1, spacing_m=0.05)
+        answer = call(node, SpawnParts, f"{base}/spawn_parts", good)
+        assert answer.success, answer.message
+        assert list(answer.part_ids) == [1, 2, 3]
+
+        def four_parts() -> bool:
+            return bool(parts) and len(parts[-1].parts) == 4
+
+        assert wait_until(four_parts, 10.0)
+        positions = [p.position_m for p in parts[-1].parts]
+        assert np.allclose(positions, [0.0, 0.1, 0.15, 0.2], atol=1e-6)
+        assert all(p.phase == p.PHASE_STICK for p in parts[-1].parts)
+
+        reset = call(node, Trigger, f"{base}/reset", Trigger.Request())
+        assert reset.success
+        parts.clear()
+
+        def one_part() -> bool:
+            return bool(parts) and len(parts[-1].parts) == 1
+
+        assert wait_until(one_part, 10.0)
+
+
+def test_sim_time_mode_publishes_clock_faster_than_real_time() -> None:
+    ns = "/sim_clock"
+    command = [
+        SIMULATOR, "--ros-args", "-r", f"__ns:={ns}", "-p", "use_sim_time:=true",
+        "-p", "real_time_factor:=0.0", "-p", "max_step_s:=0.2", "-p", "imu_rate_hz:=200.0",
+        "-p", "state_rate_hz:=100.0",
+    ]  # fmt: skip
+    with running(command) as process, probe_node() as node:
+        clocks: list[ClockMessage] = []
+        node.create_subscription(ClockMessage, "/clock", clocks.append, 100)
+        assert wait_until(lambda: len(clocks) > 2, 20.0)
+        wall_start, sim_start = time.monotonic(), Time.from_msg(clocks[-1].clock).nanoseconds
+        time.sleep(2.0)
+        wall = time.monotonic() - wall_start
+        simulated = (Time.from_msg(clocks[-1].clock).nanoseconds - sim_start) * 1e-9
+        assert simulated / wall > 5.0, f"only {simulated / wall:.1f}x real time"
+        times = [Time.from_msg(c.clock).nanoseconds for c in clocks]
+        assert times == sorted(times)
+    assert process.returncode == 0
