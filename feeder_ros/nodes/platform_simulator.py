@@ -16,6 +16,7 @@ from __future__ import annotations
 
 import math
 import threading
+import time
 from typing import Any
 
 import numpy as np
@@ -364,6 +365,17 @@ class PlatformSimulator(Node):
         return min(target, self._sim.time_s + step)
 
     def _tick(self) -> None:
+        """One timer tick: catch up with the schedule; unpaced, step until the tick's time is up
+        (then return, so services and parameter changes are served between ticks)."""
+        started = time.perf_counter()
+        budget = 0.8 * float(self._values["tick_period_s"])
+        while True:
+            self._step()
+            unpaced = self._values["real_time_factor"] == 0.0
+            if not unpaced or time.perf_counter() - started > budget:
+                return
+
+    def _step(self) -> None:
         with self._lock:
             target = self._target_time()
             if target <= self._sim.time_s:

@@ -16,7 +16,6 @@ from typing import Any
 import numpy as np
 import pytest
 import yaml
-from feeder_ros.msg import CarrierState
 from mcap.reader import make_reader
 from rclpy.serialization import deserialize_message, serialize_message
 from rosbags.rosbag2 import Reader as RosbagsReader
@@ -35,6 +34,7 @@ from feeder_ros.bag import (
     read_columns,
     reindex,
 )
+from feeder_ros.msg import CarrierState
 
 T0 = 1_800_000_000_000_000_000
 REPO = Path(__file__).resolve().parents[2]

@@ -14,16 +14,6 @@ from typing import Any
 import numpy as np
 import pytest
 from diagnostic_msgs.msg import DiagnosticArray, DiagnosticStatus
-from feeder_ros.msg import (
-    CarrierState,
-    DriveCommand,
-    DriveState,
-    PartExit,
-    PartSensorEvent,
-    PartStateArray,
-    SpeedStatus,
-    VehicleEstimate,
-)
 from mcap.reader import make_reader
 from rclpy.serialization import deserialize_message, serialize_message
 from sensor_msgs.msg import BatteryState, Imu, JointState, NavSatFix
@@ -40,6 +30,16 @@ from feeder_ros.bag import (
     read_columns,
 )
 from feeder_ros.bag.schemas import installed_definitions
+from feeder_ros.msg import (
+    CarrierState,
+    DriveCommand,
+    DriveState,
+    PartExit,
+    PartSensorEvent,
+    PartStateArray,
+    SpeedStatus,
+    VehicleEstimate,
+)
 
 INT_RANGES = {
     "int8": (-128, 127),
@@ -199,6 +199,7 @@ def _compare_tree(expected: Any, decoded: Any, where: str) -> None:
 
 def _fill_parts(msg: Any, rng: np.random.Generator) -> Any:
     from diagnostic_msgs.msg import KeyValue
+
     from feeder_ros.msg import PartState
 
     if isinstance(msg, PartStateArray):

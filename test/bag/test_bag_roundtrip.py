@@ -12,14 +12,6 @@ from typing import Any
 import numpy as np
 import pytest
 import yaml
-from feeder_ros.msg import (
-    CarrierState,
-    DriveCommand,
-    DriveState,
-    PartState,
-    PartStateArray,
-    VehicleEstimate,
-)
 from mcap.reader import make_reader
 from rclpy.serialization import deserialize_message, serialize_message
 from rosbags.rosbag2 import Reader as RosbagsReader
@@ -36,6 +28,14 @@ from feeder_ros.bag import (
     iter_messages,
     read_columns,
     ros2msg_schema,
+)
+from feeder_ros.msg import (
+    CarrierState,
+    DriveCommand,
+    DriveState,
+    PartState,
+    PartStateArray,
+    VehicleEstimate,
 )
 
 RNG_SEED = 20261121
