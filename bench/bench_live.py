@@ -17,6 +17,7 @@ Run: ``python bench/bench_live.py [--seconds 60] [--quick] [--output FILE.md]``.
 from __future__ import annotations
 
 import argparse
+import itertools
 import os
 import resource
 import shutil
@@ -65,7 +66,7 @@ class StampCounter:
             stamps = sorted(self.stamps)
         if len(stamps) < 2:
             return len(stamps), 0, 0
-        steps = [(b - a) for a, b in zip(stamps, stamps[1:], strict=False)]
+        steps = [b - a for a, b in itertools.pairwise(stamps)]
         duplicated = sum(1 for step in steps if step == 0)
         missing = sum(max(round(step / self.period_ns) - 1, 0) for step in steps)
         return len(stamps), missing, duplicated

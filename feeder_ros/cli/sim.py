@@ -89,16 +89,18 @@ def load_parameters(
         raise CommandError(f"{path}: not valid YAML: {error}") from None
     section: Any = None
     if isinstance(document, Mapping):
-        keys = (node_name, f"/{node_name}") if preset else (node_name, f"/{node_name}", "/**")
+        keys: tuple[str, ...] = (node_name, f"/{node_name}", f"/**/{node_name}")
+        if not preset:
+            keys += ("/**",)
         for key in keys:
             if key in document:
                 section = document[key]
                 break
     if not isinstance(section, Mapping) or not isinstance(section.get("ros__parameters"), Mapping):
         presets = sorted(
-            str(key)[len(NODE_NAME) + 1 :]
+            str(key).rsplit("/", 1)[-1][len(NODE_NAME) + 1 :]
             for key in (document if isinstance(document, Mapping) else {})
-            if str(key).startswith(f"{NODE_NAME}_")
+            if str(key).rsplit("/", 1)[-1].startswith(f"{NODE_NAME}_")
         )
         known = f" (presets in this file: {', '.join(presets) or 'none'})" if preset else ""
         raise CommandError(

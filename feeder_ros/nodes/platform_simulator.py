@@ -200,6 +200,7 @@ class PlatformSimulator(Node):
         self.get_logger().info(
             f"simulating f_n = {self._sim.params.forward_natural_frequency_hz:.2f} / "
             f"{self._sim.params.backward_natural_frequency_hz:.2f} Hz, "
+            f"c = {self._sim.params.damping_ns_per_m:g} N*s/m, "
             f"{self._sim.part_count} parts, "
             + ("sim time (/clock)" if self._sim_clock else "wall-clock paced")
         )
