@@ -16,6 +16,8 @@ CONSOLE_SCRIPTS = [
     "feeder = feeder_ros.cli.main:main",
     "manual_drive = feeder_ros.nodes.manual_drive:main",
     "platform_simulator = feeder_ros.nodes.platform_simulator:main",
+    "vehicle_estimator = feeder_ros.nodes.vehicle_estimator:main",
+    "speed_monitor = feeder_ros.nodes.speed_monitor:main",
 ]
 
 setup(

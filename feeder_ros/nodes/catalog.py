@@ -9,6 +9,8 @@ from feeder_ros.node_interfaces import NodeInterface
 NODE_MODULES: tuple[str, ...] = (
     "feeder_ros.nodes.manual_drive",
     "feeder_ros.nodes.platform_simulator",
+    "feeder_ros.nodes.vehicle_estimator",
+    "feeder_ros.nodes.speed_monitor",
 )
 
 

@@ -37,6 +37,7 @@ class ParameterSpec:
     exclusive_minimum: bool = False
     choices: tuple[str, ...] = ()  # for str: the allowed values; empty: any string
     read_only: bool = False  # fixed for the life of a running simulator node
+    nan_allowed: bool = False  # for float: NaN means "not set" (e.g. no target speed)
 
     def check(self, value: object) -> float | int | bool | str:
         """Return ``value`` converted to this parameter's type, or raise :class:`ParameterError`."""
@@ -60,6 +61,8 @@ class ParameterSpec:
             number: float | int = int(value)
         else:
             number = float(value)
+        if math.isnan(number) and self.nan_allowed:
+            return number
         if not math.isfinite(number):
             raise ParameterError(f"{self.name}={value!r} is not finite")
         if self.minimum is not None:

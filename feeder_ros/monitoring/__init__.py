@@ -1,0 +1,1 @@
+"""Speed and feed monitoring of a feeder cell (ROS-free)."""

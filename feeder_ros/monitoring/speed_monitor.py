@@ -1,0 +1,272 @@
+"""Part speed and feed rate against target, with the alarms a feeder cell needs (ROS-free).
+
+Inputs, each with its own time stamp in seconds (the node clock: simulated time and bag replay
+work; a stamp earlier than the last one seen means time jumped back and restarts every window):
+
+* the estimator's mean part speed (with its confidence),
+* part-present sensor edges (transit time between two sensors: the paper's 8.5 cm timing),
+* parts leaving the track (the feed rate, parts per minute),
+* the drive state (driving or not) and the target speed.
+
+:meth:`SpeedMonitor.evaluate` gives a :class:`MonitorStatus`: the measured values, a level
+(OK/WARN/ERROR, as diagnostic_msgs) and a bit set of alarms. Alarms have hysteresis: under- and
+overspeed raise when the relative error exceeds ``speed_tolerance`` for ``alarm_delay_s`` and clear
+only below ``speed_tolerance * clear_ratio``; stall, starvation, track full and sensor timeout
+raise after their configured times and clear as soon as the condition is gone.
+"""
+
+from __future__ import annotations
+
+import math
+from collections import deque
+from dataclasses import dataclass, field
+
+from feeder_ros.physics.parameters import ParameterError
+
+__all__ = [
+    "ALARM_NAMES",
+    "Alarm",
+    "MonitorConfig",
+    "MonitorStatus",
+    "SpeedMonitor",
+]
+
+
+class Alarm:
+    """Bit values of ``SpeedStatus.alarms`` (msg/SpeedStatus.msg ALARM_*)."""
+
+    UNDERSPEED = 1
+    OVERSPEED = 2
+    STALL = 4
+    STARVATION = 8
+    TRACK_FULL = 16
+    SENSOR_TIMEOUT = 32
+
+
+ALARM_NAMES = {
+    Alarm.UNDERSPEED: "underspeed",
+    Alarm.OVERSPEED: "overspeed",
+    Alarm.STALL: "stall",
+    Alarm.STARVATION: "starvation",
+    Alarm.TRACK_FULL: "track full",
+    Alarm.SENSOR_TIMEOUT: "sensor timeout",
+}
+_ERROR_ALARMS = Alarm.STALL | Alarm.TRACK_FULL | Alarm.SENSOR_TIMEOUT
+
+OK, WARN, ERROR = 0, 1, 2
+
+
+@dataclass(frozen=True)
+class MonitorConfig:
+    speed_tolerance: float = 0.15  #: relative speed error that raises under/overspeed
+    clear_ratio: float = 0.6  #: the alarm clears below speed_tolerance * clear_ratio
+    alarm_delay_s: float = 2.0  #: a speed error must last this long to raise
+    min_confidence: float = 0.5  #: estimates below this confidence are not used
+    stall_speed_mps: float = 0.5e-3  #: driving with |speed| below this is a stall ...
+    stall_time_s: float = 3.0  #: ... for this long
+    starvation_time_s: float = 30.0  #: driving and no part seen for this long
+    track_full_time_s: float = 10.0  #: a part-present sensor covered this long
+    sensor_timeout_s: float = 2.0  #: no estimate for this long while driving
+    feed_window_s: float = 60.0  #: window of the feed rate
+    transit_pair: tuple[int, int] = (0, 1)  #: sensor indices timed for the transit speed
+    transit_distance_m: float = 0.085  #: distance between those sensors
+
+    def __post_init__(self) -> None:
+        for name in (
+            "speed_tolerance",
+            "alarm_delay_s",
+            "stall_time_s",
+            "starvation_time_s",
+            "track_full_time_s",
+            "sensor_timeout_s",
+            "feed_window_s",
+            "transit_distance_m",
+            "stall_speed_mps",
+        ):
+            value = getattr(self, name)
+            if not (isinstance(value, int | float) and math.isfinite(value) and value > 0.0):
+                raise ParameterError(f"{name}={value!r} must be finite and > 0")
+        for name in ("clear_ratio", "min_confidence"):
+            value = getattr(self, name)
+            if not (isinstance(value, int | float) and 0.0 <= value <= 1.0):
+                raise ParameterError(f"{name}={value!r} must be in [0, 1]")
+        first, second = self.transit_pair
+        if first == second or min(first, second) < 0:
+            raise ParameterError(f"transit_pair={self.transit_pair!r}: two different sensors")
+
+
+@dataclass(frozen=True)
+class MonitorStatus:
+    t_s: float
+    target_speed_mps: float  #: nan when no target is set
+    estimated_speed_mps: float  #: nan when unknown
+    transit_speed_mps: float  #: nan when no part has been timed yet
+    feed_rate_ppm: float
+    level: int  #: 0 OK, 1 WARN, 2 ERROR
+    alarms: int  #: bit set of Alarm values
+    message: str
+    details: dict[str, str] = field(default_factory=dict)
+
+
+class SpeedMonitor:
+    def __init__(self, config: MonitorConfig | None = None) -> None:
+        self.config = config if config is not None else MonitorConfig()
+        self.reset()
+
+    def reset(self) -> None:
+        """Forget everything (also done when time jumps backwards)."""
+        self._last_t = -math.inf
+        self._driving = False
+        self._driving_since = math.nan
+        self._target = math.nan
+        self._speed = math.nan
+        self._speed_t = -math.inf
+        self._speed_error_since = math.nan
+        self._speed_alarm = 0
+        self._slow_since = math.nan
+        self._last_part_t = math.nan
+        self._transit = math.nan
+        self._arrivals: dict[tuple[int, int], float] = {}  # (sensor, part) -> rising edge time
+        self._covered_since: dict[int, float] = {}  # sensor -> time its part arrived
+        self._entry_queue: deque[float] = deque()  # first-sensor arrivals without a part id
+        self._exits: deque[float] = deque()
+        self.time_jumps = 0
+
+    # -- inputs ------------------------------------------------------------------------------
+    def _advance(self, t: float) -> None:
+        if not math.isfinite(t):
+            raise ParameterError(f"time {t!r} is not finite")
+        if t < self._last_t:
+            jumps = self.time_jumps + 1
+            self.reset()
+            self.time_jumps = jumps
+        self._last_t = t
+
+    def on_drive(self, t: float, driving: bool, target_speed_mps: float) -> None:
+        """The drive state: whether it drives, and the target part speed (nan: none)."""
+        self._advance(t)
+        if driving and not self._driving:
+            self._driving_since = t
+            self._last_part_t = t  # starvation counts from the start of driving
+            self._slow_since = math.nan
+        self._driving = driving
+        if not (math.isnan(target_speed_mps) or math.isfinite(target_speed_mps)):
+            raise ParameterError(f"target_speed_mps={target_speed_mps!r} is not finite")
+        self._target = target_speed_mps
+
+    def on_estimate(self, t: float, mean_speed_mps: float, confidence: float) -> None:
+        self._advance(t)
+        if math.isfinite(mean_speed_mps) and confidence >= self.config.min_confidence:
+            self._speed = mean_speed_mps
+            self._speed_t = t
+
+    def on_sensor_edge(self, t: float, sensor: int, part: int | None, present: bool) -> None:
+        """A part-present sensor edge; ``part`` is the part id where the sensor knows it."""
+        self._advance(t)
+        self._last_part_t = t
+        first, second = self.config.transit_pair
+        if present:
+            self._covered_since[sensor] = t
+            if sensor == first:
+                if part is None:
+                    self._entry_queue.append(t)
+                else:
+                    self._arrivals[(first, part)] = t
+            elif sensor == second:
+                start = (
+                    self._arrivals.pop((first, part), math.nan)
+                    if part is not None
+                    else (self._entry_queue.popleft() if self._entry_queue else math.nan)
+                )
+                if math.isfinite(start) and t > start:
+                    self._transit = self.config.transit_distance_m / (t - start)
+        else:
+            self._covered_since.pop(sensor, None)
+
+    def on_exit(self, t: float) -> None:
+        self._advance(t)
+        self._last_part_t = t
+        self._exits.append(t)
+
+    # -- output ------------------------------------------------------------------------------
+    def evaluate(self, t: float) -> MonitorStatus:
+        self._advance(t)
+        cfg = self.config
+        while self._exits and self._exits[0] < t - cfg.feed_window_s:
+            self._exits.popleft()
+        driving_for = t - self._driving_since if self._driving else 0.0
+        window = min(cfg.feed_window_s, driving_for) if self._driving else cfg.feed_window_s
+        feed_rate = len(self._exits) * 60.0 / window if window > 0.0 else 0.0
+
+        alarms = 0
+        fresh = t - self._speed_t <= cfg.sensor_timeout_s
+        speed = self._speed if fresh else math.nan
+        if self._driving and driving_for > cfg.sensor_timeout_s and not fresh:
+            alarms |= Alarm.SENSOR_TIMEOUT
+
+        # stall: driving but the part does not move
+        if self._driving and fresh and abs(speed) < cfg.stall_speed_mps:
+            if math.isnan(self._slow_since):
+                self._slow_since = t
+            if t - self._slow_since >= cfg.stall_time_s:
+                alarms |= Alarm.STALL
+        else:
+            self._slow_since = math.nan
+
+        # under/overspeed against the target, with hysteresis
+        if self._driving and fresh and math.isfinite(self._target) and self._target != 0.0:
+            error = (speed - self._target) / abs(self._target)
+            if abs(error) > cfg.speed_tolerance:
+                if math.isnan(self._speed_error_since):
+                    self._speed_error_since = t
+                if t - self._speed_error_since >= cfg.alarm_delay_s:
+                    self._speed_alarm = Alarm.UNDERSPEED if error < 0 else Alarm.OVERSPEED
+            else:
+                self._speed_error_since = math.nan
+                if abs(error) < cfg.speed_tolerance * cfg.clear_ratio:
+                    self._speed_alarm = 0
+        else:
+            self._speed_error_since = math.nan
+            self._speed_alarm = 0
+        alarms |= self._speed_alarm
+
+        if (
+            self._driving
+            and math.isfinite(self._last_part_t)
+            and t - self._last_part_t >= cfg.starvation_time_s
+        ):
+            alarms |= Alarm.STARVATION
+        if any(t - since >= cfg.track_full_time_s for since in self._covered_since.values()):
+            alarms |= Alarm.TRACK_FULL
+
+        level = ERROR if alarms & _ERROR_ALARMS else (WARN if alarms else OK)
+        names = [name for bit, name in ALARM_NAMES.items() if alarms & bit]
+        if names:
+            message = ", ".join(names)
+        elif not self._driving:
+            message = "idle"
+        else:
+            message = "at target" if math.isfinite(self._target) else "running (no target)"
+        details = {
+            "driving": str(self._driving).lower(),
+            "speed_error_percent": (
+                f"{100.0 * (speed - self._target) / abs(self._target):.1f}"
+                if math.isfinite(speed) and math.isfinite(self._target) and self._target != 0.0
+                else "nan"
+            ),
+            "seconds_since_last_part": (
+                f"{t - self._last_part_t:.1f}" if math.isfinite(self._last_part_t) else "nan"
+            ),
+            "time_jumps_back": str(self.time_jumps),
+        }
+        return MonitorStatus(
+            t_s=t,
+            target_speed_mps=self._target,
+            estimated_speed_mps=speed,
+            transit_speed_mps=self._transit,
+            feed_rate_ppm=feed_rate,
+            level=level,
+            alarms=alarms,
+            message=message,
+            details=details,
+        )

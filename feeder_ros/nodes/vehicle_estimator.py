@@ -1,0 +1,362 @@
+"""``vehicle_estimator``: a part's speed and stick/slip phase from the carrier accelerometer alone.
+
+The paper's sensorless idea as a node: accelerometer samples (``imu``, or ``imu/batch`` for
+high-rate streams) and, when available, the drive command go into the ROS-free
+:class:`~feeder_ros.estimation.vehicle_estimator.VehicleEstimator`; its records come out as
+``feeder_ros/VehicleEstimate`` on ``estimate`` at ``publish_rate_hz`` and as ``/diagnostics``.
+Callbacks only queue samples; the estimation runs in the publish timer, in batches.
+"""
+
+from __future__ import annotations
+
+import math
+import threading
+from typing import Any
+
+import numpy as np
+from diagnostic_msgs.msg import DiagnosticArray, DiagnosticStatus, KeyValue
+from rclpy.node import Node
+from rclpy.parameter import Parameter
+from rclpy.qos import QoSProfile, ReliabilityPolicy
+from sensor_msgs.msg import Imu
+
+from feeder_ros.estimation.stick_slip_observer import PartModel
+from feeder_ros.estimation.vehicle_estimator import (
+    EstimatorConfig,
+    Status,
+    VehicleEstimator,
+)
+from feeder_ros.estimation.vehicle_estimator import VehicleEstimate as EstimateRecord
+from feeder_ros.msg import AccelerometerBatch, CarrierState, DriveCommand, VehicleEstimate
+from feeder_ros.node_interfaces import NodeInterface, TopicSpec
+from feeder_ros.nodes.ros_parameters import declare_parameters, validator
+from feeder_ros.nodes.runner import run_node
+from feeder_ros.physics.parameters import PARAMETER_SPECS, FeederParameters, ParameterSpec
+
+_AXES = ("x", "y", "z")
+_PART_PARAMETERS = ("static_friction", "kinetic_friction", "groove_angle_deg", "gravity_mps2")
+PARAMETERS: dict[str, ParameterSpec] = {
+    **{name: PARAMETER_SPECS[name] for name in _PART_PARAMETERS},
+    **{
+        spec.name: spec
+        for spec in (
+            ParameterSpec(
+                "window_s", float, "s", "window of the mean speed and slip fraction", 0.05, 600.0
+            ),
+            ParameterSpec(
+                "fit_window_s", float, "s", "window of the periodic carrier fit", 0.05, 60.0
+            ),
+            ParameterSpec(
+                "max_harmonic_hz", float, "Hz", "highest harmonic of the carrier fit", 1.0, 1e4
+            ),
+            ParameterSpec(
+                "max_bridge_s", float, "s", "gaps up to this long are bridged by the model", 0.0
+            ),
+            ParameterSpec(
+                "publish_rate_hz", float, "Hz", "estimate publish rate", 0.5, 200.0, read_only=True
+            ),
+            ParameterSpec(
+                "imu_axis",
+                str,
+                "",
+                "accelerometer axis along the track",
+                choices=_AXES,
+                read_only=True,
+            ),
+            ParameterSpec(
+                "use_carrier_state",
+                bool,
+                "",
+                "estimate from a displacement sensor (carrier/state) instead of the accelerometer",
+                read_only=True,
+            ),
+            ParameterSpec(
+                "input_timeout_s",
+                float,
+                "s",
+                "no sample for this long is a sensor timeout (diagnostics ERROR)",
+                minimum=0.0,
+                exclusive_minimum=True,
+            ),
+        )
+    },
+}
+DEFAULTS: dict[str, Any] = {
+    **{name: getattr(FeederParameters(), name) for name in _PART_PARAMETERS},
+    "window_s": 2.0,
+    "fit_window_s": 1.0,
+    "max_harmonic_hz": 450.0,
+    "max_bridge_s": 0.25,
+    "publish_rate_hz": 20.0,
+    "imu_axis": "x",
+    "use_carrier_state": False,
+    "input_timeout_s": 1.0,
+}
+SENSOR_QOS = QoSProfile(depth=500, reliability=ReliabilityPolicy.BEST_EFFORT)
+RELIABLE_QOS = QoSProfile(depth=1000, reliability=ReliabilityPolicy.RELIABLE)
+COMMAND_QOS = QoSProfile(depth=10, reliability=ReliabilityPolicy.RELIABLE)
+
+INTERFACE = NodeInterface(
+    executable="vehicle_estimator",
+    node_name="vehicle_estimator",
+    summary="estimates a nominal part's speed and stick/slip phase from the carrier accelerometer",
+    publishes=(
+        TopicSpec(
+            "estimate",
+            "feeder_ros/msg/VehicleEstimate",
+            "reliable, depth 10",
+            "part velocity, phase, advance per cycle, slip fraction, mean speed, confidences",
+        ),
+        TopicSpec(
+            "/diagnostics",
+            "diagnostic_msgs/msg/DiagnosticArray",
+            "reliable, depth 10",
+            "estimator status at 1 Hz (input gaps, invalid samples, timeouts)",
+        ),
+    ),
+    subscribes=(
+        TopicSpec("imu", "sensor_msgs/msg/Imu", "sensor data, depth 500", "carrier accelerometer"),
+        TopicSpec(
+            "imu/batch",
+            "feeder_ros/msg/AccelerometerBatch",
+            "sensor data, depth 500",
+            "the same as batches (high-rate sensors)",
+        ),
+        TopicSpec(
+            "drive/command",
+            "feeder_ros/msg/DriveCommand",
+            "reliable, depth 10",
+            "drive frequency (optional; estimated from the spectrum without it)",
+        ),
+        TopicSpec(
+            "carrier/state",
+            "feeder_ros/msg/CarrierState",
+            "reliable, depth 1000",
+            "carrier displacement, used when use_carrier_state is true",
+        ),
+    ),
+    parameters=PARAMETERS,
+)
+
+_WARN_STATUSES = {
+    Status.GAP,
+    Status.INVALID_SAMPLES,
+    Status.OUT_OF_ORDER,
+    Status.DRIVE_CHANGED,
+    Status.SETTLING,
+}
+
+
+def _seconds(stamp: Any) -> float:
+    return float(stamp.sec) + float(stamp.nanosec) * 1e-9
+
+
+def _check_combination(values: dict[str, Any]) -> None:
+    _build_estimator(values)
+
+
+def _build_estimator(values: dict[str, Any]) -> VehicleEstimator:
+    """A fresh estimator for these parameter values (raises ParameterError naming a bad one)."""
+    kappa = 1.0 / math.sin(math.radians(values["groove_angle_deg"]) / 2.0)
+    part = PartModel(
+        values["static_friction"], values["kinetic_friction"], kappa, values["gravity_mps2"]
+    )
+    fit_window = values["fit_window_s"]
+    config = EstimatorConfig(
+        part=part,
+        window_s=values["window_s"],
+        fit_window_s=fit_window,
+        min_fit_s=min(0.3, fit_window),
+        max_harmonic_hz=values["max_harmonic_hz"],
+        max_bridge_s=values["max_bridge_s"],
+        batch_interval_s=0.0,  # the node already batches per publish period
+    )
+    return VehicleEstimator(config)
+
+
+class VehicleEstimatorNode(Node):
+    def __init__(self) -> None:
+        super().__init__(INTERFACE.node_name)
+        self._values = declare_parameters(self, PARAMETERS.values(), DEFAULTS)
+        _check_combination(self._values)
+        self.add_on_set_parameters_callback(
+            validator(PARAMETERS, check_all=_check_combination, current=lambda: self._values)
+        )
+        self.add_post_set_parameters_callback(self._apply_parameters)
+        self._lock = threading.Lock()
+        self._estimator = _build_estimator(self._values)
+        self._queue_t: list[float] = []
+        self._queue_value: list[float] = []
+        self._batches: list[tuple[np.ndarray, np.ndarray]] = []
+        self._received = 0
+        self._last_input = self.get_clock().now()
+        self._record: EstimateRecord = self._estimator.last_estimate
+        self._axis = _AXES.index(self._values["imu_axis"])
+
+        self._publisher = self.create_publisher(VehicleEstimate, "estimate", 10)
+        self._diagnostics = self.create_publisher(DiagnosticArray, "/diagnostics", 10)
+        if self._values["use_carrier_state"]:
+            self.create_subscription(CarrierState, "carrier/state", self._on_state, RELIABLE_QOS)
+        else:
+            self.create_subscription(Imu, "imu", self._on_imu, SENSOR_QOS)
+            self.create_subscription(AccelerometerBatch, "imu/batch", self._on_batch, SENSOR_QOS)
+        self.create_subscription(DriveCommand, "drive/command", self._on_command, COMMAND_QOS)
+        self.create_timer(1.0 / self._values["publish_rate_hz"], self._estimate)
+        self.create_timer(1.0, self._publish_diagnostics)
+
+    # -- parameters ----------------------------------------------------------------------------
+    def _apply_parameters(self, parameters: list[Parameter[Any]]) -> None:
+        changed = False
+        for parameter in parameters:
+            if parameter.name in PARAMETERS:
+                self._values[parameter.name] = parameter.value
+                changed = True
+        if changed:
+            with self._lock:  # a new nominal part or window: start over
+                self._estimator = _build_estimator(self._values)
+                self._record = self._estimator.last_estimate
+
+    # -- inputs (queue only) -------------------------------------------------------------------
+    def _on_imu(self, message: Imu) -> None:
+        acceleration = message.linear_acceleration
+        value = (acceleration.x, acceleration.y, acceleration.z)[self._axis]
+        with self._lock:
+            self._queue_t.append(_seconds(message.header.stamp))
+            self._queue_value.append(value)
+
+    def _on_batch(self, message: AccelerometerBatch) -> None:
+        columns = (
+            message.acceleration_x_mps2,
+            message.acceleration_y_mps2,
+            message.acceleration_z_mps2,
+        )
+        values = np.asarray(columns[self._axis], dtype=np.float64)
+        period = message.sample_period_s
+        if not (math.isfinite(period) and period > 0.0) or values.size == 0:
+            self.get_logger().warn(
+                f"ignoring accelerometer batch: sample_period_s={period!r}, {values.size} samples",
+                throttle_duration_sec=5.0,
+            )
+            return
+        t = _seconds(message.header.stamp) + period * np.arange(values.size)
+        with self._lock:
+            self._batches.append((t, values))
+
+    def _on_state(self, message: CarrierState) -> None:
+        with self._lock:
+            self._queue_t.append(_seconds(message.header.stamp))
+            self._queue_value.append(message.displacement_m)
+
+    def _on_command(self, message: DriveCommand) -> None:
+        frequency = message.frequency_hz
+        if not (math.isfinite(frequency) and frequency > 0.0):
+            self.get_logger().warn(
+                f"ignoring drive command with frequency_hz={frequency!r}",
+                throttle_duration_sec=5.0,
+            )
+            return
+        amplitude = message.amplitude_n if message.enabled else 0.0
+        with self._lock:
+            self._drain()  # samples before the command belong to the previous drive
+            try:
+                self._estimator.set_drive(frequency, amplitude, _seconds(message.header.stamp))
+            except ValueError as error:
+                self.get_logger().warn(f"ignoring drive command: {error}")
+
+    # -- estimation ----------------------------------------------------------------------------
+    def _drain(self) -> None:
+        """Feed queued samples to the estimator (caller holds the lock)."""
+        chunks = list(self._batches)
+        if self._queue_t:
+            chunks.append((np.asarray(self._queue_t), np.asarray(self._queue_value)))
+        self._batches, self._queue_t, self._queue_value = [], [], []
+        if not chunks:
+            return
+        chunks.sort(key=lambda chunk: float(chunk[0][0]))
+        t = np.concatenate([c[0] for c in chunks])
+        values = np.concatenate([c[1] for c in chunks])
+        self._received += t.size
+        self._last_input = self.get_clock().now()
+        if self._values["use_carrier_state"]:
+            self._record = self._estimator.push_carrier_state(t, values)
+        else:
+            self._record = self._estimator.push(t, values)
+
+    def _estimate(self) -> None:
+        with self._lock:
+            before = self._received
+            self._drain()
+            if self._received == before:
+                return
+            record = self._record
+        self._publisher.publish(self._to_message(record))
+
+    def _to_message(self, record: EstimateRecord) -> VehicleEstimate:
+        message = VehicleEstimate()
+        if math.isfinite(record.t_s):  # no stamp (0) before the first sample
+            seconds = math.floor(record.t_s)
+            message.header.stamp.sec = int(seconds)
+            message.header.stamp.nanosec = min(round((record.t_s - seconds) * 1e9), 999_999_999)
+        message.header.frame_id = "track"
+        for name in (
+            "carrier_velocity_mps",
+            "part_velocity_mps",
+            "part_velocity_confidence",
+            "phase_confidence",
+            "advance_per_cycle_m",
+            "advance_per_cycle_confidence",
+            "slip_fraction",
+            "slip_fraction_confidence",
+            "mean_speed_mps",
+            "mean_speed_confidence",
+            "window_s",
+        ):
+            setattr(message, name, float(getattr(record, name)))
+        message.phase = int(record.phase)
+        message.status = int(record.status)
+        message.status_message = record.status_message
+        return message
+
+    def _publish_diagnostics(self) -> None:
+        with self._lock:
+            record = self._record
+            silent_s = (self.get_clock().now() - self._last_input).nanoseconds * 1e-9
+            received = self._received
+        if received == 0 or silent_s > self._values["input_timeout_s"]:
+            level = DiagnosticStatus.ERROR
+            text = (
+                "no accelerometer samples yet"
+                if received == 0
+                else f"sensor timeout: no sample for {silent_s:.1f} s"
+            )
+        elif record.status in _WARN_STATUSES:
+            level, text = DiagnosticStatus.WARN, record.status_message or record.status.name
+        else:
+            level, text = DiagnosticStatus.OK, "estimating"
+        values = {
+            "status": record.status.name,
+            "status_message": record.status_message,
+            "samples_received": str(received),
+            "drive_frequency_hz": f"{record.drive_frequency_hz:.4g}",
+            "mean_speed_mps": f"{record.mean_speed_mps:.6g}",
+            "mean_speed_confidence": f"{record.mean_speed_confidence:.3f}",
+            "slip_fraction": f"{record.slip_fraction:.4g}",
+        }
+        status = DiagnosticStatus(
+            name=f"{self.get_fully_qualified_name()}: estimate",
+            hardware_id="carrier accelerometer",
+            level=level,
+            message=text,
+            values=[KeyValue(key=k, value=v) for k, v in values.items()],
+        )
+        array = DiagnosticArray(status=[status])
+        array.header.stamp = self.get_clock().now().to_msg()
+        self._diagnostics.publish(array)
+
+
+def main(args: list[str] | None = None) -> int:
+    return run_node(VehicleEstimatorNode, args)
+
+
+if __name__ == "__main__":
+    raise SystemExit(main())

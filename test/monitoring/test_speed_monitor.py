@@ -1,0 +1,155 @@
+"""The speed monitor's pure core: measurements, alarms with hysteresis, time jumps, refusals."""
+
+from __future__ import annotations
+
+import math
+import re
+
+import pytest
+
+from feeder_ros.monitoring.speed_monitor import Alarm, MonitorConfig, MonitorStatus, SpeedMonitor
+from feeder_ros.physics.parameters import ParameterError
+
+TARGET = 0.02
+
+
+def _run(
+    monitor: SpeedMonitor, t0: float, t1: float, speed: float, dt: float = 0.1
+) -> MonitorStatus:
+    status = monitor.evaluate(t0)
+    t = t0
+    while t <= t1 + 1e-9:
+        monitor.on_estimate(t, speed, 1.0)
+        status = monitor.evaluate(t)
+        t += dt
+    return status
+
+
+def test_underspeed_raises_after_the_delay_and_clears_with_hysteresis() -> None:
+    monitor = SpeedMonitor(MonitorConfig(speed_tolerance=0.15, clear_ratio=0.6, alarm_delay_s=2.0))
+    monitor.on_drive(0.0, True, TARGET)
+    assert _run(monitor, 0.0, 5.0, TARGET).alarms == 0
+    status = _run(monitor, 5.1, 6.5, 0.8 * TARGET)  # 20 % slow for 1.4 s: not yet
+    assert status.alarms == 0
+    status = _run(monitor, 6.6, 7.5, 0.8 * TARGET)  # ... for 2.4 s: raised
+    assert status.alarms == Alarm.UNDERSPEED
+    assert status.level == 1
+    assert status.message == "underspeed"
+    assert status.details["speed_error_percent"] == "-20.0"
+    # 12 % slow: inside the tolerance but not below the clear level (9 %): stays raised
+    assert _run(monitor, 7.6, 12.0, 0.88 * TARGET).alarms == Alarm.UNDERSPEED
+    assert _run(monitor, 12.1, 12.5, 0.95 * TARGET).alarms == 0
+
+
+def test_overspeed() -> None:
+    monitor = SpeedMonitor()
+    monitor.on_drive(0.0, True, TARGET)
+    assert _run(monitor, 0.0, 3.0, 1.5 * TARGET).alarms == Alarm.OVERSPEED
+
+
+def test_stall_is_an_error_and_clears_when_parts_move() -> None:
+    monitor = SpeedMonitor(MonitorConfig(stall_time_s=3.0, starvation_time_s=100.0))
+    monitor.on_drive(0.0, True, math.nan)
+    assert _run(monitor, 0.0, 2.5, 0.0).alarms == 0
+    status = _run(monitor, 2.6, 3.5, 1e-5)
+    assert status.alarms & Alarm.STALL
+    assert status.level == 2
+    assert _run(monitor, 3.6, 4.0, 0.01).alarms == 0
+
+
+def test_no_alarm_while_idle() -> None:
+    monitor = SpeedMonitor()
+    monitor.on_drive(0.0, False, TARGET)
+    status = _run(monitor, 0.0, 100.0, 0.0)
+    assert status.alarms == 0
+    assert status.message == "idle"
+
+
+def test_starvation_raises_without_parts_and_clears_on_the_next_part() -> None:
+    monitor = SpeedMonitor(MonitorConfig(starvation_time_s=10.0))
+    monitor.on_drive(0.0, True, math.nan)
+    assert _run(monitor, 0.0, 9.5, 0.01).alarms == 0
+    assert _run(monitor, 9.6, 10.5, 0.01).alarms == Alarm.STARVATION
+    monitor.on_sensor_edge(10.6, 0, 7, True)
+    assert monitor.evaluate(10.7).alarms == 0
+
+
+def test_track_full_when_a_sensor_stays_covered() -> None:
+    monitor = SpeedMonitor(MonitorConfig(track_full_time_s=5.0))
+    monitor.on_drive(0.0, True, math.nan)
+    monitor.on_sensor_edge(1.0, 1, 4, True)
+    assert not _run(monitor, 1.0, 5.9, 0.01).alarms & Alarm.TRACK_FULL
+    status = _run(monitor, 6.0, 6.5, 0.01)
+    assert status.alarms & Alarm.TRACK_FULL
+    assert status.level == 2
+    monitor.on_sensor_edge(6.6, 1, 4, False)
+    assert not monitor.evaluate(6.7).alarms & Alarm.TRACK_FULL
+
+
+def test_sensor_timeout_when_estimates_stop() -> None:
+    monitor = SpeedMonitor(MonitorConfig(sensor_timeout_s=2.0))
+    monitor.on_drive(0.0, True, math.nan)
+    _run(monitor, 0.0, 3.0, 0.01)
+    assert monitor.evaluate(4.0).alarms == 0
+    status = monitor.evaluate(5.5)
+    assert status.alarms == Alarm.SENSOR_TIMEOUT
+    assert math.isnan(status.estimated_speed_mps)
+    # low-confidence estimates do not count as fresh
+    monitor.on_estimate(5.6, 0.01, 0.1)
+    assert monitor.evaluate(5.7).alarms == Alarm.SENSOR_TIMEOUT
+
+
+def test_transit_speed_by_part_id_and_first_in_first_out() -> None:
+    monitor = SpeedMonitor(MonitorConfig(transit_distance_m=0.085))
+    monitor.on_sensor_edge(10.0, 0, 3, True)
+    monitor.on_sensor_edge(11.0, 0, 4, True)
+    monitor.on_sensor_edge(15.0, 1, 3, True)
+    assert monitor.evaluate(15.0).transit_speed_mps == pytest.approx(0.085 / 5.0)
+    anonymous = SpeedMonitor(MonitorConfig(transit_distance_m=0.085))
+    anonymous.on_sensor_edge(1.0, 0, None, True)
+    anonymous.on_sensor_edge(2.0, 0, None, True)
+    anonymous.on_sensor_edge(5.25, 1, None, True)  # the first part in is the first out
+    assert anonymous.evaluate(5.3).transit_speed_mps == pytest.approx(0.085 / 4.25)
+
+
+def test_feed_rate_over_the_window() -> None:
+    monitor = SpeedMonitor(MonitorConfig(feed_window_s=60.0))
+    monitor.on_drive(0.0, True, math.nan)
+    for k in range(6):
+        monitor.on_exit(5.0 * (k + 1))
+    assert monitor.evaluate(30.0).feed_rate_ppm == pytest.approx(12.0)  # 6 parts in 30 s
+    assert monitor.evaluate(60.0).feed_rate_ppm == pytest.approx(6.0)
+    assert monitor.evaluate(100.0).feed_rate_ppm == pytest.approx(0.0)  # all left the window
+
+
+def test_time_jumping_back_restarts_the_windows() -> None:
+    monitor = SpeedMonitor()
+    monitor.on_drive(100.0, True, TARGET)
+    monitor.on_exit(101.0)
+    _run(monitor, 101.0, 110.0, 0.5 * TARGET)
+    assert monitor.evaluate(110.0).alarms == Alarm.UNDERSPEED
+    status = monitor.evaluate(5.0)  # e.g. a bag replayed again
+    assert status.alarms == 0
+    assert status.feed_rate_ppm == 0.0
+    assert status.details["time_jumps_back"] == "1"
+
+
+@pytest.mark.parametrize(
+    ("change", "needle"),
+    [
+        ({"speed_tolerance": 0.0}, "speed_tolerance=0.0"),
+        ({"stall_time_s": math.nan}, "stall_time_s=nan"),
+        ({"clear_ratio": 1.5}, "clear_ratio=1.5"),
+        ({"transit_pair": (1, 1)}, "transit_pair=(1, 1)"),
+    ],
+)
+def test_bad_configuration_is_refused_with_the_value(
+    change: dict[str, object], needle: str
+) -> None:
+    with pytest.raises(ParameterError, match=re.escape(needle)):
+        MonitorConfig(**change)
+
+
+def test_non_finite_time_is_refused() -> None:
+    with pytest.raises(ParameterError, match="time nan"):
+        SpeedMonitor().evaluate(math.nan)

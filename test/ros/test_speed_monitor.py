@@ -1,0 +1,81 @@
+"""The speed monitor node over DDS: alarms raised and cleared in a stall and a starvation."""
+
+from __future__ import annotations
+
+import sys
+import threading
+import time
+from pathlib import Path
+
+from diagnostic_msgs.msg import DiagnosticArray, DiagnosticStatus
+from rclpy.qos import QoSProfile, ReliabilityPolicy
+from ros_test_tools import probe_node, running, wait_until
+
+from feeder_ros.msg import DriveCommand, PartSensorEvent, SpeedStatus, VehicleEstimate
+
+BIN = Path(sys.executable).parent
+RELIABLE = QoSProfile(depth=100, reliability=ReliabilityPolicy.RELIABLE)
+
+
+def test_stall_and_starvation_are_raised_and_cleared() -> None:
+    ns = "/monitor_alarms"
+    command = [
+        str(BIN / "speed_monitor"), "--ros-args", "-r", f"__ns:={ns}",
+        "-p", "stall_time_s:=1.0", "-p", "starvation_time_s:=2.5", "-p", "publish_rate_hz:=10.0",
+        "-p", "target_speed_mps:=0.01",
+    ]  # fmt: skip
+    with running(command), probe_node() as node:
+        statuses: list[SpeedStatus] = []
+        diagnostics: list[DiagnosticArray] = []
+        node.create_subscription(SpeedStatus, f"{ns}/speed/status", statuses.append, 100)
+        node.create_subscription(DiagnosticArray, "/diagnostics", diagnostics.append, 100)
+        drive = node.create_publisher(DriveCommand, f"{ns}/drive/command", RELIABLE)
+        estimate = node.create_publisher(VehicleEstimate, f"{ns}/estimate", RELIABLE)
+        edges = node.create_publisher(PartSensorEvent, f"{ns}/parts/sensor_events", RELIABLE)
+        assert wait_until(lambda: bool(statuses), 20.0)
+        assert wait_until(lambda: estimate.get_subscription_count() > 0, 10.0)
+        speed = {"value": 0.0}
+        stop = threading.Event()
+
+        def feed() -> None:  # a drive that is on, and an estimator reporting `speed`
+            while not stop.is_set():
+                drive.publish(DriveCommand(enabled=True, frequency_hz=20.0, amplitude_n=40.0))
+                estimate.publish(
+                    VehicleEstimate(mean_speed_mps=speed["value"], mean_speed_confidence=1.0)
+                )
+                time.sleep(0.05)
+
+        feeder = threading.Thread(target=feed, daemon=True)
+        feeder.start()
+        try:
+
+            def alarm(bit: int) -> bool:
+                return bool(statuses) and bool(statuses[-1].alarms & bit)
+
+            # the part does not move: stall (an error)
+            assert wait_until(lambda: alarm(SpeedStatus.ALARM_STALL), 10.0)
+            assert statuses[-1].level == SpeedStatus.LEVEL_ERROR
+            own = [
+                s
+                for array in diagnostics
+                for s in array.status
+                if s.name == f"{ns}/speed_monitor: part speed"
+            ]
+            assert own
+            assert own[-1].level == DiagnosticStatus.ERROR
+            # parts move at the target: the stall clears
+            speed["value"] = 0.01
+            assert wait_until(lambda: not alarm(SpeedStatus.ALARM_STALL), 5.0)
+            assert statuses[-1].estimated_speed_mps == 0.01
+            # no part seen since the drive started: starvation (a warning) ...
+            assert wait_until(lambda: alarm(SpeedStatus.ALARM_STARVATION), 10.0)
+            assert statuses[-1].level == SpeedStatus.LEVEL_WARN
+            # ... cleared by the next part at a sensor
+            edge = PartSensorEvent(sensor_index=0, part_id=3, present=True)
+            edges.publish(edge)
+            assert wait_until(lambda: not alarm(SpeedStatus.ALARM_STARVATION), 5.0)
+            assert wait_until(lambda: statuses[-1].alarms == 0, 5.0)
+            assert statuses[-1].message == "at target"
+        finally:
+            stop.set()
+            feeder.join(timeout=5)

@@ -1,0 +1,170 @@
+"""The estimator node over DDS: against the simulator's ground truth, and on bad input."""
+
+from __future__ import annotations
+
+import math
+import sys
+import time
+from contextlib import ExitStack
+from pathlib import Path
+
+import numpy as np
+import pytest
+from diagnostic_msgs.msg import DiagnosticArray, DiagnosticStatus
+from rclpy.qos import QoSProfile, ReliabilityPolicy
+from ros_test_tools import probe_node, running, wait_until
+from sensor_msgs.msg import Imu
+
+from feeder_ros.msg import DriveCommand, PartStateArray, VehicleEstimate
+
+BIN = Path(sys.executable).parent
+CONFIG = Path(__file__).resolve().parents[2] / "config" / "platform_simulator.yaml"
+RELIABLE = QoSProfile(depth=1000, reliability=ReliabilityPolicy.RELIABLE)
+
+
+def _seconds(stamp) -> float:  # type: ignore[no-untyped-def]
+    return stamp.sec + stamp.nanosec * 1e-9
+
+
+def _feeder(stack: ExitStack, ns: str, frequency_hz: float) -> None:
+    """Simulator (damped preset) + a drive + the estimator, in namespace ``ns``."""
+    stack.enter_context(
+        running(
+            [
+                str(BIN / "platform_simulator"), "--ros-args", "--params-file", str(CONFIG),
+                "-r", "__node:=platform_simulator_realistic", "-r", f"__ns:={ns}",
+                "-p", "imu_rate_hz:=500.0", "-p", "state_rate_hz:=50.0",
+                "-p", "imu_noise_density_mps2_per_sqrt_hz:=0.003", "-p", "imu_bias_mps2:=0.05",
+            ]
+        )
+    )  # fmt: skip
+    stack.enter_context(
+        running(
+            [
+                str(BIN / "manual_drive"), "--ros-args", "-r", f"__ns:={ns}",
+                "-p", f"frequency_hz:={frequency_hz}", "-p", "amplitude_n:=40.0",
+            ]
+        )
+    )  # fmt: skip
+    stack.enter_context(
+        running([str(BIN / "vehicle_estimator"), "--ros-args", "-r", f"__ns:={ns}"])
+    )
+
+
+def _true_speed(parts: list[PartStateArray], span_s: float) -> float:
+    samples = [
+        (_seconds(m.header.stamp), m.parts[0].position_m)
+        for m in parts
+        if m.parts and m.parts[0].on_track
+    ]
+    t, x = np.array(samples).T
+    window = t >= t[-1] - span_s
+    return float((x[window][-1] - x[window][0]) / (t[window][-1] - t[window][0]))
+
+
+def test_namespaced_feeders_side_by_side_estimate_their_own_true_speed() -> None:
+    feeders = {"/cell/feeder_a": 20.0, "/cell/feeder_b": 30.0}
+    with ExitStack() as stack, probe_node() as node:
+        estimates: dict[str, list[VehicleEstimate]] = {ns: [] for ns in feeders}
+        parts: dict[str, list[PartStateArray]] = {ns: [] for ns in feeders}
+        diagnostics: list[DiagnosticArray] = []
+        for ns in feeders:
+            node.create_subscription(VehicleEstimate, f"{ns}/estimate", estimates[ns].append, 100)
+            node.create_subscription(
+                PartStateArray, f"{ns}/parts/state", parts[ns].append, RELIABLE
+            )
+        node.create_subscription(DiagnosticArray, "/diagnostics", diagnostics.append, 100)
+        for ns, frequency in feeders.items():
+            _feeder(stack, ns, frequency)
+
+        def settled() -> bool:
+            return all(
+                len(records) > 10
+                and records[-1].status == VehicleEstimate.STATUS_OK
+                and records[-1].mean_speed_confidence > 0.8
+                for records in estimates.values()
+            )
+
+        assert wait_until(settled, 60.0), {
+            ns: (r[-1].status, r[-1].status_message) if r else None for ns, r in estimates.items()
+        }
+        time.sleep(3.0)  # a full estimator window (2 s) of steady state
+        speeds = {}
+        for ns in feeders:
+            last = estimates[ns][-1]
+            truth = _true_speed(parts[ns], last.window_s)
+            speeds[ns] = last.mean_speed_mps
+            assert last.mean_speed_mps == pytest.approx(truth, rel=0.05), (ns, truth)
+            assert 0.0 <= last.slip_fraction <= 1.0
+            assert last.phase in (0, 1, 2)
+            assert math.isfinite(last.advance_per_cycle_m)
+        # the two feeders run at different drive points, so their speeds differ clearly
+        assert speeds["/cell/feeder_a"] > 2.0 * speeds["/cell/feeder_b"] > 0.0
+        names = {s.name for array in diagnostics for s in array.status}
+        for ns in feeders:
+            assert f"{ns}/vehicle_estimator: estimate" in names
+
+
+def test_bad_samples_are_reported_not_averaged_in() -> None:
+    ns = "/estimator_input"
+    command = [str(BIN / "vehicle_estimator"), "--ros-args", "-r", f"__ns:={ns}"]
+    with running(command), probe_node() as node:
+        estimates: list[VehicleEstimate] = []
+        diagnostics: list[DiagnosticArray] = []
+        node.create_subscription(VehicleEstimate, f"{ns}/estimate", estimates.append, 100)
+        node.create_subscription(DiagnosticArray, "/diagnostics", diagnostics.append, 100)
+        imu = node.create_publisher(Imu, f"{ns}/imu", RELIABLE)
+        drive = node.create_publisher(DriveCommand, f"{ns}/drive/command", 10)
+        assert wait_until(lambda: imu.get_subscription_count() > 0, 20.0)
+        assert wait_until(lambda: drive.get_subscription_count() > 0, 20.0)
+
+        def own_status() -> DiagnosticStatus | None:
+            for array in reversed(diagnostics):
+                for status in array.status:
+                    if status.name == f"{ns}/vehicle_estimator: estimate":
+                        return status
+            return None
+
+        # before any sample: diagnostics say so (sensor missing is an error)
+        assert wait_until(lambda: own_status() is not None, 10.0)
+        first = own_status()
+        assert first is not None
+        assert first.level == DiagnosticStatus.ERROR
+
+        t0 = 1000.0
+        command = DriveCommand(enabled=True, frequency_hz=25.0, amplitude_n=40.0)
+        command.header.stamp.sec = int(t0)
+        drive.publish(command)
+
+        def send(t: float, value: float) -> None:
+            message = Imu()
+            message.header.stamp.sec = int(t)
+            message.header.stamp.nanosec = round((t - int(t)) * 1e9)
+            message.linear_acceleration.x = value
+            imu.publish(message)
+
+        rate = 500.0
+        for k in range(int(2.0 * rate)):
+            t = t0 + k / rate
+            value = 3.0 * math.sin(2 * math.pi * 25.0 * t)
+            if k in (700, 701, 702):
+                value = math.nan
+            send(t, value)
+            if k % 50 == 0:
+                time.sleep(0.01)
+
+        def reported(code: int) -> bool:
+            return any(e.status == code for e in estimates)
+
+        assert wait_until(lambda: reported(VehicleEstimate.STATUS_INVALID_SAMPLES), 10.0), [
+            (e.status, e.status_message) for e in estimates[-5:]
+        ]
+        bad = next(e for e in estimates if e.status == VehicleEstimate.STATUS_INVALID_SAMPLES)
+        assert "3" in bad.status_message  # names how many samples were dropped
+        for estimate in estimates:
+            assert not (math.isnan(estimate.mean_speed_mps) and estimate.mean_speed_confidence > 0)
+
+        # stamps going backwards are dropped and reported
+        for k in range(20):
+            send(t0 + 0.5 + k / rate, 0.0)
+        assert wait_until(lambda: reported(VehicleEstimate.STATUS_OUT_OF_ORDER), 10.0)
