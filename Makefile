@@ -13,7 +13,7 @@ WS := $(WORK)/ws
 
 INTERFACE_SOURCES := CMakeLists.txt package.xml $(wildcard msg/*.msg srv/*.srv) tools/install_interfaces.py
 PACKAGE_SOURCES := $(shell find feeder_ros config resource -type f -not -path '*/__pycache__/*' 2>/dev/null)
-LINT_PATHS := $(wildcard feeder_ros test bench tools examples) setup.py
+LINT_PATHS := $(wildcard feeder_ros test bench tools examples launch) setup.py
 
 .PHONY: help install workspace test lint typecheck pytest demo bench constraints clean
 

@@ -31,6 +31,7 @@ setup(
     data_files=[
         (f"share/{PACKAGE}", ["package.xml"]),
         (f"share/{PACKAGE}/config", glob("config/*.yaml")),
+        (f"share/{PACKAGE}/launch", glob("launch/*.launch.py")),
         ("share/ament_index/resource_index/packages", [f"resource/{PACKAGE}"]),
     ],
     install_requires=["numpy", "scipy", "numba", "pyyaml", "mcap", "zstandard", "matplotlib"],

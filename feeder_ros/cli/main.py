@@ -23,6 +23,7 @@ __all__ = ["SUBCOMMANDS", "CommandError", "main"]
 # name -> module (imported lazily so that ``feeder --help`` stays fast)
 SUBCOMMANDS: dict[str, str] = {
     "sim": "feeder_ros.cli.sim",
+    "cell": "feeder_ros.cli.cell",
 }
 
 

@@ -67,8 +67,8 @@ INTERFACE = NodeInterface(
 
 
 class ManualDrive(Node):
-    def __init__(self) -> None:
-        super().__init__(INTERFACE.node_name)
+    def __init__(self, **kwargs: Any) -> None:
+        super().__init__(INTERFACE.node_name, **kwargs)
         self._values = declare_parameters(self, PARAMETERS.values(), DEFAULTS)
         self.add_on_set_parameters_callback(validator(PARAMETERS, current=lambda: self._values))
         self.add_post_set_parameters_callback(self._apply)
@@ -90,6 +90,9 @@ class ManualDrive(Node):
         message.amplitude_percent = float(self._values["amplitude_percent"])
         message.ramp_time_s = float(self._values["ramp_time_s"])
         self._publisher.publish(message)
+
+
+NODE_CLASS = ManualDrive
 
 
 def main(args: list[str] | None = None) -> int:

@@ -160,8 +160,8 @@ def _check_combination(values: dict[str, Any]) -> None:
 
 
 class PlatformSimulator(Node):
-    def __init__(self) -> None:
-        super().__init__(INTERFACE.node_name)
+    def __init__(self, **kwargs: Any) -> None:
+        super().__init__(INTERFACE.node_name, **kwargs)
         self._values = declare_parameters(
             self, PARAMETERS.values(), {**PHYSICS_DEFAULTS, **NODE_DEFAULTS}
         )
@@ -565,6 +565,9 @@ class PlatformSimulator(Node):
             message.part_id = int(part)
             message.parts_out_total = self._parts_out
             self._exit_pub.publish(message)
+
+
+NODE_CLASS = PlatformSimulator
 
 
 def main(args: list[str] | None = None) -> int:

@@ -75,7 +75,7 @@ def declare_parameters(
 
 def validator(
     specs: Mapping[str, ParameterSpec],
-    check_all: Callable[[dict[str, Any]], None] | None = None,
+    check_all: Callable[[dict[str, Any]], object] | None = None,
     current: Callable[[], Mapping[str, Any]] | None = None,
 ) -> Callable[[list[Parameter[Any]]], SetParametersResult]:
     """An on-set-parameters callback that validates each value, then the combination.

@@ -179,8 +179,8 @@ def _config(values: dict[str, Any]) -> MonitorConfig:
 
 
 class SpeedMonitorNode(Node):
-    def __init__(self) -> None:
-        super().__init__(INTERFACE.node_name)
+    def __init__(self, **kwargs: Any) -> None:
+        super().__init__(INTERFACE.node_name, **kwargs)
         self._values = declare_parameters(self, PARAMETERS.values(), DEFAULTS)
         _config(self._values)
         self.add_on_set_parameters_callback(
@@ -271,6 +271,9 @@ class SpeedMonitorNode(Node):
         array = DiagnosticArray(status=[diagnostic])
         array.header = message.header
         self._diagnostics_pub.publish(array)
+
+
+NODE_CLASS = SpeedMonitorNode
 
 
 def main(args: list[str] | None = None) -> int:

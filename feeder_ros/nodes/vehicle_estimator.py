@@ -175,8 +175,8 @@ def _build_estimator(values: dict[str, Any]) -> VehicleEstimator:
 
 
 class VehicleEstimatorNode(Node):
-    def __init__(self) -> None:
-        super().__init__(INTERFACE.node_name)
+    def __init__(self, **kwargs: Any) -> None:
+        super().__init__(INTERFACE.node_name, **kwargs)
         self._values = declare_parameters(self, PARAMETERS.values(), DEFAULTS)
         _check_combination(self._values)
         self.add_on_set_parameters_callback(
@@ -352,6 +352,9 @@ class VehicleEstimatorNode(Node):
         array = DiagnosticArray(status=[status])
         array.header.stamp = self.get_clock().now().to_msg()
         self._diagnostics.publish(array)
+
+
+NODE_CLASS = VehicleEstimatorNode
 
 
 def main(args: list[str] | None = None) -> int:

@@ -1,0 +1,232 @@
+#!/usr/bin/env python3
+"""An example cell controller: drives a feeder only through the suite's public ROS interface.
+
+What a pick-and-place cell's PLC or orchestrator does with a feeder, as a small rclpy program:
+
+1. bring the drive interface up (lifecycle configure + activate) and send a heartbeat;
+2. start the feeder and ask for a part speed (``set_target_speed``), then watch ``speed/status``;
+3. change the speed;
+4. go silent for longer than the watchdog timeout (as a crashed controller would): the drive
+   interface ramps the feeder down and reports a fault; come back, reset the fault, restart;
+5. stop.
+
+Every step is printed with what the feeder answered; ``--timeline FILE`` writes the steps as JSON
+(the demo uses it for its summary). Run it against a running cell, e.g. ``feeder cell``:
+
+    python examples/cell_controller.py --namespace /demo_cell/feeder_1
+"""
+
+from __future__ import annotations
+
+import argparse
+import json
+import math
+import sys
+import threading
+import time
+from pathlib import Path
+from typing import Any
+
+import rclpy
+from lifecycle_msgs.msg import Transition
+from lifecycle_msgs.srv import ChangeState, GetState
+from rclpy.executors import MultiThreadedExecutor
+from rclpy.node import Node
+from rclpy.qos import QoSProfile, ReliabilityPolicy
+from std_msgs.msg import Header
+from std_srvs.srv import Trigger
+
+from feeder_ros.msg import DriveState, SpeedStatus
+from feeder_ros.srv import SetTargetSpeed
+
+RELIABLE = QoSProfile(depth=10, reliability=ReliabilityPolicy.RELIABLE)
+STATE_NAMES = {0: "idle", 1: "ramping", 2: "running", 3: "fault", 4: "e-stop"}
+
+
+class CellController(Node):
+    def __init__(self, namespace: str) -> None:
+        super().__init__("cell_controller", namespace=namespace)
+        self.timeline: list[dict[str, Any]] = []
+        self.heartbeat_on = True
+        self.drive_state: DriveState | None = None
+        self.speed_status: SpeedStatus | None = None
+        self._heartbeat = self.create_publisher(Header, "heartbeat", RELIABLE)
+        self.create_subscription(DriveState, "drive/state", self._on_drive_state, RELIABLE)
+        self.create_subscription(SpeedStatus, "speed/status", self._on_speed_status, RELIABLE)
+        self.create_timer(0.2, self._beat)
+        self._start_time = time.monotonic()
+
+    # -- inputs --------------------------------------------------------------------------------
+    def _beat(self) -> None:
+        if self.heartbeat_on:
+            header = Header()
+            header.stamp = self.get_clock().now().to_msg()
+            header.frame_id = "cell_controller"
+            self._heartbeat.publish(header)
+
+    def _on_drive_state(self, message: DriveState) -> None:
+        self.drive_state = message
+
+    def _on_speed_status(self, message: SpeedStatus) -> None:
+        self.speed_status = message
+
+    # -- helpers -------------------------------------------------------------------------------
+    def log(self, step: str, **details: Any) -> None:
+        elapsed = time.monotonic() - self._start_time
+        entry = {"t_s": round(elapsed, 2), "step": step, **details}
+        self.timeline.append(entry)
+        extra = ", ".join(f"{k}={v}" for k, v in details.items())
+        print(f"[controller {elapsed:6.1f} s] {step}" + (f": {extra}" if extra else ""), flush=True)
+
+    def call(self, service_type: Any, name: str, request: Any, timeout_s: float = 30.0) -> Any:
+        client = self.create_client(service_type, name)
+        try:
+            if not client.wait_for_service(timeout_sec=timeout_s):
+                raise RuntimeError(f"service {self.get_namespace()}/{name} is not available")
+            future = client.call_async(request)
+            deadline = time.monotonic() + timeout_s
+            while not future.done():
+                if time.monotonic() > deadline:
+                    raise RuntimeError(f"service {name} did not answer in {timeout_s} s")
+                time.sleep(0.02)
+            return future.result()
+        finally:
+            self.destroy_client(client)
+
+    def wait_for(self, what: str, predicate: Any, timeout_s: float) -> bool:
+        deadline = time.monotonic() + timeout_s
+        while time.monotonic() < deadline:
+            if predicate():
+                return True
+            time.sleep(0.1)
+        self.log(f"gave up waiting for {what}", timeout_s=timeout_s)
+        return False
+
+    def state_name(self) -> str:
+        state = self.drive_state
+        return STATE_NAMES.get(state.state, "?") if state is not None else "unknown"
+
+    # -- the scenario --------------------------------------------------------------------------
+    def bring_up(self) -> None:
+        answer = self.call(GetState, "drive_interface/get_state", GetState.Request())
+        label = answer.current_state.label
+        self.log("drive interface lifecycle state", state=label)
+        for transition, needed in (
+            (Transition.TRANSITION_CONFIGURE, "unconfigured"),
+            (Transition.TRANSITION_ACTIVATE, "inactive"),
+        ):
+            if label == needed:
+                result = self.call(
+                    ChangeState,
+                    "drive_interface/change_state",
+                    ChangeState.Request(transition=Transition(id=transition)),
+                    timeout_s=120.0,  # configure computes the speed table (cached afterwards)
+                )
+                label = "inactive" if needed == "unconfigured" else "active"
+                self.log(f"lifecycle -> {label}", success=result.success)
+
+    def trigger(self, name: str) -> bool:
+        answer = self.call(Trigger, name, Trigger.Request())
+        self.log(name, success=answer.success, message=answer.message)
+        return bool(answer.success)
+
+    def target_speed(self, speed_mps: float) -> bool:
+        answer = self.call(
+            SetTargetSpeed, "set_target_speed", SetTargetSpeed.Request(speed_mps=speed_mps)
+        )
+        result = {0: "accepted", 1: "clamped", 2: "refused"}.get(answer.result, "?")
+        self.log(
+            "set_target_speed",
+            speed_mm_s=round(speed_mps * 1e3, 2),
+            result=result,
+            reason=answer.reason,
+            frequency_hz=round(answer.frequency_hz, 2),
+            amplitude_percent=round(answer.amplitude_percent, 1),
+            predicted_mm_s=round(answer.predicted_speed_mps * 1e3, 2),
+        )
+        return answer.result != 2
+
+    def watch_speed(self, seconds: float) -> None:
+        """Watch speed/status for a while; log what the speed monitor said at the end."""
+        time.sleep(seconds)
+        status = self.speed_status
+        if status is None:
+            self.log("no speed status received")
+            return
+        self.log(
+            "speed status",
+            target_mm_s=round(status.target_speed_mps * 1e3, 2),
+            estimated_mm_s=(
+                round(status.estimated_speed_mps * 1e3, 2)
+                if math.isfinite(status.estimated_speed_mps)
+                else None
+            ),
+            transit_mm_s=(
+                round(status.transit_speed_mps * 1e3, 2)
+                if math.isfinite(status.transit_speed_mps)
+                else None
+            ),
+            feed_rate_ppm=round(status.feed_rate_ppm, 1),
+            level=("OK", "WARN", "ERROR")[min(status.level, 2)],
+            message=status.message,
+        )
+
+    def scenario(self, first_mps: float, second_mps: float, hold_s: float) -> int:
+        self.bring_up()
+        if not self.wait_for("drive state", lambda: self.drive_state is not None, 30.0):
+            return 1
+        self.target_speed(first_mps)
+        self.trigger("start")
+        self.watch_speed(hold_s)
+        self.target_speed(second_mps)
+        self.watch_speed(hold_s)
+
+        timeout = 2.0
+        self.log("heartbeat stopped (simulating a controller crash)")
+        self.heartbeat_on = False
+        tripped = self.wait_for("watchdog fault", lambda: self.state_name() == "fault", 10.0)
+        reason = self.drive_state.fault_reason if self.drive_state else ""
+        self.log("watchdog", tripped=tripped, state=self.state_name(), reason=reason)
+        time.sleep(timeout)
+        self.heartbeat_on = True
+        self.log("heartbeat resumed")
+        time.sleep(0.5)
+        self.trigger("reset_fault")
+        self.trigger("start")
+        self.watch_speed(hold_s)
+        self.trigger("stop")
+        stopped = self.wait_for("stop", lambda: self.state_name() == "idle", 30.0)
+        self.log("stopped", state=self.state_name())
+        return 0 if tripped and stopped else 1
+
+
+def main(argv: list[str] | None = None) -> int:
+    parser = argparse.ArgumentParser(description=__doc__.splitlines()[0] if __doc__ else None)
+    parser.add_argument("--namespace", default="/demo_cell/feeder_1")
+    parser.add_argument("--speed", type=float, default=0.015, help="first target speed [m/s]")
+    parser.add_argument("--second-speed", type=float, default=0.008, help="then [m/s]")
+    parser.add_argument("--hold", type=float, default=12.0, help="seconds at each speed")
+    parser.add_argument("--timeline", type=Path, help="write the steps as JSON here")
+    args = parser.parse_args(argv)
+    with rclpy.init():
+        controller = CellController(args.namespace)
+        executor = MultiThreadedExecutor(num_threads=2)
+        executor.add_node(controller)
+        spinner = threading.Thread(target=executor.spin, daemon=True)
+        spinner.start()
+        try:
+            status = controller.scenario(args.speed, args.second_speed, args.hold)
+        except RuntimeError as error:
+            controller.log("failed", error=str(error))
+            status = 1
+        finally:
+            if args.timeline is not None:
+                args.timeline.write_text(json.dumps(controller.timeline, indent=2) + "\n")
+            executor.shutdown()
+            spinner.join(timeout=5)
+            controller.destroy_node()
+    return status
+
+
+if __name__ == "__main__":
+    sys.exit(main())

@@ -1,0 +1,179 @@
+"""``feeder cell``: bring up a feeder cell from its description (``config/cell.yaml``).
+
+Each node runs as its own process, like a launch file (default), or all in one process
+(``--composed``). Ctrl-C or SIGTERM stops every node cleanly; a node that dies stops the cell;
+children also get SIGTERM if this process itself is killed, so no node is left orphaned.
+"""
+
+from __future__ import annotations
+
+import argparse
+import ctypes
+import os
+import shutil
+import signal
+import subprocess
+import sys
+import tempfile
+import time
+from pathlib import Path
+
+from feeder_ros.cell import CellDescription, CellError, NodeLaunch, load_cell, parameters_document
+from feeder_ros.cli.main import CommandError
+
+HELP = "start a feeder cell (all its nodes) from a cell description; Ctrl-C stops it"
+CELL_FILE = "cell.yaml"
+_PR_SET_PDEATHSIG = 1
+
+
+def default_cell_path() -> Path:
+    source = Path(__file__).resolve().parents[2] / "config" / CELL_FILE
+    if source.is_file():
+        return source
+    installed = Path(sys.prefix) / "share" / "feeder_ros" / "config" / CELL_FILE
+    if installed.is_file():
+        return installed
+    raise CommandError(f"cannot find {CELL_FILE}; pass --config FILE")
+
+
+def node_executables() -> frozenset[str]:
+    from feeder_ros.nodes.catalog import NODE_MODULES
+
+    return frozenset(module.rsplit(".", 1)[-1] for module in NODE_MODULES)
+
+
+def executable_path(name: str) -> Path:
+    """Where the executable is: the ament index (a ROS workspace) first, then this venv."""
+    try:
+        from ament_index_python.packages import get_package_prefix
+
+        candidate = Path(get_package_prefix("feeder_ros")) / "lib" / "feeder_ros" / name
+        if candidate.is_file():
+            return candidate
+    except (ImportError, LookupError, OSError):  # not installed, not found, no AMENT_PREFIX_PATH
+        pass
+    candidate = Path(sys.executable).parent / name
+    if candidate.is_file():
+        return candidate
+    found = shutil.which(name)
+    if found is None:
+        raise CommandError(f"executable {name!r} not found (run `make install`)")
+    return Path(found)
+
+
+def add_arguments(parser: argparse.ArgumentParser) -> None:
+    parser.add_argument("--config", type=Path, help=f"cell description (default: {CELL_FILE})")
+    parser.add_argument("--composed", action="store_true", help="run all nodes in this one process")
+    parser.add_argument(
+        "--duration", type=float, help="stop after this many seconds (default: until Ctrl-C)"
+    )
+    parser.add_argument(
+        "--list", action="store_true", help="print the nodes and their command lines, then exit"
+    )
+
+
+def _die_with_parent() -> None:  # runs in the child between fork and exec
+    libc = ctypes.CDLL(None, use_errno=True)
+    libc.prctl(_PR_SET_PDEATHSIG, signal.SIGTERM)
+
+
+def run_processes(cell: CellDescription, parameters_file: Path, duration: float | None) -> int:
+    processes: list[tuple[NodeLaunch, subprocess.Popen[bytes]]] = []
+    previous = signal.signal(signal.SIGTERM, signal.default_int_handler)  # like Ctrl-C
+    status = 0
+    try:
+        for node in cell.nodes:
+            command = [str(executable_path(node.executable)), *node.ros_arguments(parameters_file)]
+            print(f"[cell] starting {node.fully_qualified_name}", flush=True)
+            processes.append((node, subprocess.Popen(command, preexec_fn=_die_with_parent)))
+        deadline = None if duration is None else time.monotonic() + duration
+        while deadline is None or time.monotonic() < deadline:
+            for node, process in processes:
+                code = process.poll()
+                if code is not None:
+                    print(
+                        f"[cell] {node.fully_qualified_name} exited with {code}: stopping the cell",
+                        flush=True,
+                    )
+                    return 1
+            time.sleep(0.2)
+    except KeyboardInterrupt:
+        print("[cell] stopping", flush=True)
+    finally:
+        status = max(status, _stop_all(processes))
+        signal.signal(signal.SIGTERM, previous)
+    return status
+
+
+def _stop_all(processes: list[tuple[NodeLaunch, subprocess.Popen[bytes]]]) -> int:
+    for _, process in processes:
+        if process.poll() is None:
+            process.send_signal(signal.SIGINT)
+    deadline = time.monotonic() + 10.0
+    status = 0
+    for node, process in processes:
+        try:
+            process.wait(timeout=max(deadline - time.monotonic(), 0.1))
+        except subprocess.TimeoutExpired:
+            print(f"[cell] {node.fully_qualified_name} did not stop: killed", flush=True)
+            process.kill()
+            process.wait()
+            status = 1
+    return status
+
+
+def run_composed(cell: CellDescription, parameters_file: Path, duration: float | None) -> int:
+    import importlib
+
+    import rclpy
+    from rclpy.executors import ExternalShutdownException, MultiThreadedExecutor
+
+    from feeder_ros.nodes.catalog import NODE_MODULES
+
+    modules = {name.rsplit(".", 1)[-1]: name for name in NODE_MODULES}
+    classes = {
+        executable: importlib.import_module(modules[executable]).NODE_CLASS
+        for executable in {launch.executable for launch in cell.nodes}
+    }
+    with rclpy.init():
+        executor = MultiThreadedExecutor(num_threads=max(2, len(cell.nodes)))
+        nodes = []
+        try:
+            for launch in cell.nodes:
+                print(f"[cell] composing {launch.fully_qualified_name}", flush=True)
+                node = classes[launch.executable](cli_args=launch.ros_arguments(parameters_file))
+                nodes.append(node)
+                executor.add_node(node)
+            deadline = None if duration is None else time.monotonic() + duration
+            while deadline is None or time.monotonic() < deadline:
+                executor.spin_once(timeout_sec=0.1)
+        except (KeyboardInterrupt, ExternalShutdownException):
+            print("[cell] stopping", flush=True)
+        finally:
+            for node in nodes:
+                executor.remove_node(node)
+                node.destroy_node()
+    return 0
+
+
+def run(args: argparse.Namespace) -> int:
+    path = args.config if args.config is not None else default_cell_path()
+    if args.duration is not None and not args.duration > 0.0:
+        raise CommandError(f"--duration {args.duration!r} must be > 0")
+    try:
+        cell = load_cell(path, node_executables())
+    except CellError as error:
+        raise CommandError(str(error)) from None
+    with tempfile.TemporaryDirectory(prefix="feeder_cell_") as directory:
+        parameters_file = Path(directory) / "parameters.yaml"
+        parameters_file.write_text(parameters_document(cell), encoding="utf-8")
+        if args.list:
+            for node in cell.nodes:
+                command = [node.executable, *node.ros_arguments(parameters_file)]
+                print(" ".join(command))
+            print(parameters_file.read_text(encoding="utf-8"))
+            return 0
+        os.environ.setdefault("ROS_AUTOMATIC_DISCOVERY_RANGE", "LOCALHOST")
+        print(f"[cell] {cell.name}: {len(cell.nodes)} nodes in {len(cell.feeders)} feeder(s)")
+        runner = run_composed if args.composed else run_processes
+        return runner(cell, parameters_file, args.duration)

@@ -1,0 +1,209 @@
+"""Cell descriptions and `feeder cell`: feeders side by side, clean shutdown, no orphans."""
+
+from __future__ import annotations
+
+import os
+import signal
+import subprocess
+import sys
+from pathlib import Path
+
+import pytest
+import yaml
+from ros_test_tools import probe_node, wait_until
+
+from feeder_ros.cell import CellError, load_cell, parameters_document
+from feeder_ros.cli.cell import node_executables
+
+BIN = Path(sys.executable).parent
+CONFIG = Path(__file__).resolve().parents[1] / "config"
+
+
+def _write(path: Path, cell: object) -> Path:
+    path.write_text(yaml.safe_dump({"cell": cell}), encoding="utf-8")
+    return path
+
+
+def _two_feeders(tmp_path: Path) -> Path:
+    feeder = {
+        "nodes": {
+            "platform_simulator": {
+                "params_file": str(CONFIG / "platform_simulator.yaml"),
+                "section": "platform_simulator_realistic",
+                "parameters": {"imu_rate_hz": 200.0, "state_rate_hz": 50.0},
+            },
+            "manual_drive": {"parameters": {"frequency_hz": 20.0, "amplitude_n": 40.0}},
+        }
+    }
+    return _write(
+        tmp_path / "cell.yaml",
+        {
+            "name": "test_cell",
+            "feeders": [
+                {"namespace": "/side/feeder_a", **feeder},
+                {"namespace": "/side/feeder_b", **feeder},
+            ],
+        },
+    )
+
+
+def test_the_shipped_cell_description_is_valid() -> None:
+    cell = load_cell(CONFIG / "cell.yaml", node_executables())
+    executables = {node.executable for node in cell.nodes}
+    assert {"platform_simulator", "vehicle_estimator", "speed_monitor"} <= executables
+    simulator = next(n for n in cell.nodes if n.executable == "platform_simulator")
+    assert simulator.parameters["damping_ns_per_m"] == 200.0  # the realistic section
+    assert simulator.parameters["feed_interval_s"] == 2.0  # the cell's own override
+
+
+def test_parameters_document_is_keyed_by_fully_qualified_name(tmp_path: Path) -> None:
+    cell = load_cell(_two_feeders(tmp_path), node_executables())
+    document = yaml.safe_load(parameters_document(cell))
+    assert set(document) == {
+        "/side/feeder_a/platform_simulator",
+        "/side/feeder_a/manual_drive",
+        "/side/feeder_b/platform_simulator",
+        "/side/feeder_b/manual_drive",
+    }
+    values = document["/side/feeder_b/platform_simulator"]["ros__parameters"]
+    assert values["imu_rate_hz"] == 200.0
+    assert values["damping_ns_per_m"] == 200.0
+
+
+@pytest.mark.parametrize(
+    ("cell", "needle"),
+    [
+        ({"feeders": []}, "cell.feeders must be a non-empty list"),
+        ({"feeders": [{"namespace": "feeder", "nodes": {"manual_drive": {}}}]}, "'feeder'"),
+        (
+            {"feeders": [{"namespace": "/a", "nodes": {"teleporter": {}}}]},
+            "nodes.teleporter: unknown node",
+        ),
+        (
+            {
+                "feeders": [
+                    {"namespace": "/a", "nodes": {"manual_drive": {}}},
+                    {"namespace": "/a", "nodes": {"manual_drive": {}}},
+                ]
+            },
+            "namespace /a is used twice",
+        ),
+        (
+            {
+                "feeders": [
+                    {"namespace": "/a", "nodes": {"manual_drive": {"params_file": "no.yaml"}}}
+                ]
+            },
+            "cannot read params_file",
+        ),
+        (
+            {
+                "feeders": [
+                    {
+                        "namespace": "/a",
+                        "nodes": {"manual_drive": {"parameters": {"rate_hz": {"x": 1}}}},
+                    }
+                ]
+            },
+            "parameters.rate_hz={'x': 1} is not a value",
+        ),
+        ({"use_sim_time": "yes", "feeders": []}, "use_sim_time='yes'"),
+    ],
+)
+def test_bad_descriptions_are_refused_naming_the_entry(
+    tmp_path: Path, cell: dict[str, object], needle: str
+) -> None:
+    with pytest.raises(CellError) as error:
+        load_cell(_write(tmp_path / "bad.yaml", cell), node_executables())
+    assert needle in str(error.value)
+
+
+def _children(pid: int) -> set[int]:
+    result = subprocess.run(
+        ["ps", "-o", "pid=", "--ppid", str(pid)], capture_output=True, text=True
+    )
+    return {int(line) for line in result.stdout.split()}
+
+
+def _alive(pid: int) -> bool:
+    try:
+        os.kill(pid, 0)
+    except ProcessLookupError:
+        return False
+    stat = Path(f"/proc/{pid}/stat")
+    return stat.exists() and stat.read_text().split()[2] != "Z"
+
+
+@pytest.mark.parametrize("how", ["ctrl-c", "sigkill"])
+def test_cell_runs_feeders_side_by_side_and_leaves_no_orphans(tmp_path: Path, how: str) -> None:
+    cell_file = _two_feeders(tmp_path)
+    process = subprocess.Popen(
+        [str(BIN / "feeder"), "cell", "--config", str(cell_file)],
+        stdout=subprocess.PIPE,
+        stderr=subprocess.STDOUT,
+        text=True,
+    )
+    try:
+        with probe_node() as node:
+
+            def all_up() -> bool:
+                names = set(node.get_node_names_and_namespaces())
+                return all(
+                    (name, ns) in names
+                    for ns in ("/side/feeder_a", "/side/feeder_b")
+                    for name in ("platform_simulator", "manual_drive")
+                )
+
+            assert wait_until(all_up, 30.0), node.get_node_names_and_namespaces()
+            topics = dict(node.get_topic_names_and_types())
+            assert "/side/feeder_a/drive/command" in topics
+            assert "/side/feeder_b/imu" in topics
+        children = _children(process.pid)
+        assert len(children) == 4
+        if how == "ctrl-c":
+            process.send_signal(signal.SIGINT)
+            output, _ = process.communicate(timeout=30)
+            assert process.returncode == 0, output
+            assert "[cell] stopping" in output
+        else:
+            process.kill()  # the supervisor dies without cleaning up ...
+            process.wait(timeout=10)
+        # ... and still no node survives it
+        assert wait_until(lambda: not any(_alive(pid) for pid in children), 15.0)
+    finally:
+        if process.poll() is None:
+            process.kill()
+
+
+def test_composed_cell_runs_every_node_in_one_process(tmp_path: Path) -> None:
+    cell_file = _two_feeders(tmp_path)
+    process = subprocess.Popen(
+        [str(BIN / "feeder"), "cell", "--composed", "--config", str(cell_file)],
+        stdout=subprocess.PIPE,
+        stderr=subprocess.STDOUT,
+        text=True,
+    )
+    try:
+        with probe_node() as node:
+
+            def up() -> bool:
+                names = set(node.get_node_names_and_namespaces())
+                return ("platform_simulator", "/side/feeder_b") in names
+
+            assert wait_until(up, 30.0)
+        assert _children(process.pid) == set()  # no child processes: all nodes inside
+        process.send_signal(signal.SIGINT)
+        output, _ = process.communicate(timeout=30)
+        assert process.returncode == 0, output
+    finally:
+        if process.poll() is None:
+            process.kill()
+
+
+def test_cell_refuses_a_bad_description_before_starting_anything(tmp_path: Path) -> None:
+    bad = _write(tmp_path / "bad.yaml", {"feeders": [{"namespace": "/a", "nodes": {"x": {}}}]})
+    result = subprocess.run(
+        [str(BIN / "feeder"), "cell", "--config", str(bad)], capture_output=True, text=True
+    )
+    assert result.returncode == 2
+    assert "nodes.x: unknown node" in result.stderr
