@@ -17,6 +17,7 @@ from pathlib import Path
 HERE = Path(__file__).resolve().parent
 BENCHMARKS = [
     ("Physics core (issue 3)", "bench_physics.py"),
+    ("Bag decoding and feeder analyze", "bench_bag.py"),
 ]
 
 

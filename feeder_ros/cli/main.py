@@ -24,6 +24,8 @@ __all__ = ["SUBCOMMANDS", "CommandError", "main"]
 SUBCOMMANDS: dict[str, str] = {
     "sim": "feeder_ros.cli.sim",
     "cell": "feeder_ros.cli.cell",
+    "record": "feeder_ros.cli.record",
+    "analyze": "feeder_ros.cli.analyze",
 }
 
 

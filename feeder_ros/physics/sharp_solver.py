@@ -835,8 +835,8 @@ def advance(
             state[S_T] = t_end
             break
 
-        # ---- one event at te
-        if tau_e == 0.0:
+        # ---- one event at te (exits always progress: they do not count as repeats)
+        if tau_e == 0.0 and f_kind[hit] != F_EXIT:
             zero_count += 1
             if zero_count > 1000:
                 counters[2] = STATUS_STUCK
@@ -1294,7 +1294,7 @@ def _march_group(
                 g_slip[g] += se
             if hit < 0:
                 break
-            if se == 0.0:
+            if se == 0.0 and f_kind[hit] != F_EXIT:
                 zero_count += 1
                 if zero_count > 1000:
                     return STATUS_STUCK

@@ -50,6 +50,7 @@ from collections.abc import Sequence
 from dataclasses import dataclass, replace
 from typing import Any
 
+import numba
 import numpy as np
 import numpy.typing as npt
 
@@ -70,6 +71,9 @@ __all__ = [
     "simulate_many",
     "simulate_parts",
 ]
+
+#: group-pieces below which a parallel group pass runs on one thread
+SMALL_PARALLEL_WORK = 4096
 
 F64 = npt.NDArray[np.float64]
 I8 = npt.NDArray[np.int8]
@@ -168,6 +172,7 @@ class SimulationResult:
     index, -1 for carrier/drive events). Exact per-part totals over the run: ``part_start_t_s``,
     ``part_start_x_m`` (lab), ``part_end_t_s`` (exit time or end of run), ``part_end_x_m``,
     ``part_slip_time_s`` (time spent slipping) and ``part_exit_t_s`` (nan if still on the track).
+    The (n, N) part arrays may be column-major (Fortran order) when the groups ran in parallel.
     """
 
     t_s: F64
@@ -479,8 +484,7 @@ class FeederSimulator:
             mass, _, _ = spec.resolved(params)
             self._m.mass[i] = mass
         self._regroup()
-        if self._state[_k.S_MODE] == 0.0 or params.stiffness_switch == "displacement":
-            self._state[_k.S_MODE] = self._classify()
+        self._state[_k.S_MODE] = self._classify()  # the switching variable may have changed
 
     # -- drive ---------------------------------------------------------------------------
     def set_drive(
@@ -620,7 +624,7 @@ class FeederSimulator:
         seg = self._drive.segments()
         cap = 1024 + 8 * (m.size + 1)
         ev_t, ev_kind, ev_part = np.empty(cap), np.empty(cap, np.int8), np.empty(cap, np.int64)
-        piece_cap = (64 + int(400 * (t_end - self.time_s))) if record else 0
+        piece_cap = min(64 + int(400 * (t_end - self.time_s)), 1 << 16) if record else 0
         pieces = np.empty((piece_cap, _k.PIECE_WIDTH))
         piece_chunks: list[F64] = []
         counters = np.zeros(5, np.int64)
@@ -717,12 +721,20 @@ class FeederSimulator:
                 ev_part = np.empty((G, cap), np.int64)
                 ev_n = np.zeros(G, np.int64)
                 status = np.full(G, -1, np.int64)
-                _k.advance_groups(
-                    batch, nb, track, t_stop, samples, ns0, out_cx, out_cv,
-                    g.L, g.D, g.mass, g.u, g.y, g.slip, g.lead, g.phase, g.head,
-                    m.group, m.next, m.offset, m.mass, m.slip0, m.exit_t,
-                    out_px, out_pv, out_pp, ev_t, ev_kind, ev_part, ev_n, status,
-                )  # fmt: skip
+                # small passes run on one thread: a parallel region costs more than it saves
+                # there (and OpenMP's spin-waiting is slow on a loaded machine)
+                threads = numba.get_num_threads()
+                if G * nb < SMALL_PARALLEL_WORK:
+                    numba.set_num_threads(1)
+                try:
+                    _k.advance_groups(
+                        batch, nb, track, t_stop, samples, ns0, out_cx, out_cv,
+                        g.L, g.D, g.mass, g.u, g.y, g.slip, g.lead, g.phase, g.head,
+                        m.group, m.next, m.offset, m.mass, m.slip0, m.exit_t,
+                        out_px, out_pv, out_pp, ev_t, ev_kind, ev_part, ev_n, status,
+                    )  # fmt: skip
+                finally:
+                    numba.set_num_threads(threads)
                 if np.any(status[saved[0].head >= 0] == _k.STATUS_BUFFER_FULL):
                     g.restore(saved[0])
                     m.restore(saved[1])

@@ -187,3 +187,25 @@ def test_parallel_group_march_equals_the_global_event_loop() -> None:
     b = np.lexsort((two.event_part, two.event_kind, two.event_t_s))
     np.testing.assert_array_equal(one.event_part[a], two.event_part[b])
     np.testing.assert_allclose(one.event_t_s[a], two.event_t_s[b], rtol=0, atol=1e-11)
+
+
+def test_switching_variable_can_change_mid_run(case_study: FeederParameters) -> None:
+    sim = FeederSimulator(case_study)
+    sim.advance(0.237)
+    sim.set_parameters(case_study.with_changes(stiffness_switch="velocity", damping_ns_per_m=5.0))
+    run = sim.advance(0.5, np.linspace(0.24, 0.5, 2601))
+    v = run.carrier_v_mps
+    assert not np.any((run.branch == 1) & (v < 0.0) | (run.branch == -1) & (v > 0.0))
+
+
+@pytest.mark.parametrize("parallel_min_groups", [1, 10**9])
+def test_many_identical_parts_leave_at_one_instant(parallel_min_groups: int) -> None:
+    params = FeederParameters(drive_amplitude_n=40.0, drive_frequency_hz=20.0, track_length_m=0.002)
+    parts = [PartSpec(0.001)] * 1500 + [PartSpec(0.0005, static_friction=0.3)] * 3
+    sim = FeederSimulator(params, parts)
+    sim.parallel_min_groups = parallel_min_groups
+    run = sim.advance(3.0)
+    exits = run.event_t_s[run.event_kind == EventKind.PART_EXIT]
+    if exits.size == 0:
+        pytest.skip("no part reached the track end")
+    assert np.count_nonzero(exits == exits[0]) >= 1500

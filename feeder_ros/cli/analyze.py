@@ -1,0 +1,98 @@
+"""``feeder analyze BAG [BAG ...]``: segments, speeds, slip, feed rate, diagnostics, sweeps.
+
+The work is in :mod:`feeder_ros.bag.analysis` (streaming, ROS free) and
+:mod:`feeder_ros.bag.report` (tables, CSV, JSON, plots, HTML). Exit status 0 when at least one bag
+was analysed, 2 when none could be.
+"""
+
+from __future__ import annotations
+
+import argparse
+import math
+import sys
+from pathlib import Path
+
+from feeder_ros.cli.main import CommandError
+
+__all__ = ["HELP", "add_arguments", "run"]
+
+HELP = "analyse recorded feeder bags: drive segments, part speed, slip, feed rate, diagnostics"
+
+
+def _non_negative(text: str) -> float:
+    try:
+        value = float(text)
+    except ValueError:
+        raise argparse.ArgumentTypeError(f"{text!r} is not a number") from None
+    if not (value >= 0.0 and math.isfinite(value)):
+        raise argparse.ArgumentTypeError(f"{text!r} must be >= 0 and finite")
+    return value
+
+
+def add_arguments(parser: argparse.ArgumentParser) -> None:
+    parser.add_argument("bags", nargs="+", type=Path, metavar="BAG", help="bag directory or .mcap")
+    parser.add_argument(
+        "--output", type=Path, metavar="DIR", help="write CSV, JSON, PNG plots and report.html here"
+    )
+    parser.add_argument(
+        "--min-segment",
+        type=_non_negative,
+        default=0.5,
+        metavar="S",
+        help="segments shorter than this (ramps) are left out (default 0.5 s)",
+    )
+    parser.add_argument(
+        "--progress", action="store_true", help="show a progress bar even if stderr is not a TTY"
+    )
+
+
+class _Bar:
+    def __init__(self, names: list[str], enabled: bool) -> None:
+        self.names = names
+        self.enabled = enabled
+        self.last: tuple[int, int] | None = None
+
+    def __call__(self, bag: int, fraction: float) -> None:
+        if not self.enabled:
+            return
+        percent = int(100 * min(max(fraction, 0.0), 1.0))
+        if self.last == (bag, percent):
+            return
+        if self.last is not None and self.last[0] != bag:
+            sys.stderr.write("\n")
+        self.last = (bag, percent)
+        sys.stderr.write(f"\r{self.names[bag]} [{'#' * (percent // 4):<25}] {percent:3d}%")
+        sys.stderr.flush()
+
+    def close(self) -> None:
+        if self.enabled and self.last is not None:
+            sys.stderr.write("\n")
+            sys.stderr.flush()
+
+
+def run(args: argparse.Namespace) -> int:
+    from feeder_ros.bag.analysis import analyze_bags
+    from feeder_ros.bag.report import format_summary, write_outputs
+
+    if args.output is not None and args.output.exists() and not args.output.is_dir():
+        raise CommandError(f"--output {args.output}: exists and is not a directory")
+    show = bool(args.progress) or sys.stderr.isatty()
+    bar = _Bar([str(p) for p in args.bags], show)
+    try:
+        analyses = analyze_bags(args.bags, min_segment_s=args.min_segment, progress=bar)
+    finally:
+        bar.close()
+    if not any(a.ok for a in analyses):
+        for a in analyses:
+            print(f"feeder analyze: error: {a.error}", file=sys.stderr)
+        return 2
+    print(format_summary(analyses))
+    if args.output is not None:
+        written = write_outputs(analyses, args.output)
+        print(
+            f"wrote {len(written)} file(s) to {args.output} (report: {args.output / 'report.html'})"
+        )
+    for a in analyses:
+        if not a.ok:
+            print(f"feeder analyze: error: {a.error}", file=sys.stderr)
+    return 0 if any(a.ok for a in analyses) else 2

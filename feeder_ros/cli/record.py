@@ -1,0 +1,110 @@
+"""``feeder record [TOPIC ...]``: record a feeder's topics from the ROS graph into a bag.
+
+Thin: options are parsed here, the recording is :func:`feeder_ros.recording.record` (rclpy, raw
+subscriptions) writing through :class:`feeder_ros.bag.BagWriter` (rosbag2 bag, MCAP storage,
+chunked zstd by default). Ctrl-C or SIGTERM stop it cleanly; ``--duration`` stops it by itself.
+"""
+
+from __future__ import annotations
+
+import argparse
+import math
+import time
+from pathlib import Path
+
+from feeder_ros.cli.main import CommandError
+
+__all__ = ["HELP", "add_arguments", "run"]
+
+HELP = "record feeder topics from the ROS graph into a rosbag2 (MCAP) bag"
+_UNITS = {"": 1, "k": 1 << 10, "K": 1 << 10, "M": 1 << 20, "G": 1 << 30}
+
+
+def _size(text: str) -> int:
+    """Bytes, with an optional K/M/G suffix (binary)."""
+    body, unit = (text[:-1], text[-1]) if text and text[-1] in "kKMG" else (text, "")
+    try:
+        value = float(body)
+    except ValueError:
+        raise argparse.ArgumentTypeError(f"{text!r} is not a size (e.g. 4096, 64K, 512M)") from None
+    if not (value >= 0 and math.isfinite(value)):
+        raise argparse.ArgumentTypeError(f"{text!r} must be >= 0")
+    return int(value * _UNITS[unit])
+
+
+def _seconds(text: str) -> float:
+    try:
+        value = float(text)
+    except ValueError:
+        raise argparse.ArgumentTypeError(f"{text!r} is not a number of seconds") from None
+    if not (value >= 0 and math.isfinite(value)):
+        raise argparse.ArgumentTypeError(f"{text!r} must be >= 0 and finite")
+    return value
+
+
+def add_arguments(parser: argparse.ArgumentParser) -> None:
+    parser.add_argument(
+        "topics",
+        nargs="*",
+        metavar="TOPIC",
+        help="topics to record (relative names are taken in --namespace); "
+        "default: every topic under --namespace, plus /diagnostics",
+    )
+    parser.add_argument(
+        "--namespace", default="/", help="the feeder's namespace (default: /, every topic)"
+    )
+    parser.add_argument(
+        "-o", "--output", type=Path, help="bag directory to create (default: feeder_<date-time>)"
+    )
+    parser.add_argument(
+        "--compression", choices=("zstd", "lz4", "none"), default="zstd", help="(default zstd)"
+    )
+    parser.add_argument(
+        "--chunk-size", type=_size, default=1 << 20, metavar="BYTES", help="(default 1M)"
+    )
+    parser.add_argument(
+        "--max-bag-size",
+        type=_size,
+        default=0,
+        metavar="BYTES",
+        help="start a new file after this many bytes (0: never)",
+    )
+    parser.add_argument(
+        "--max-bag-duration",
+        type=_seconds,
+        default=0.0,
+        metavar="S",
+        help="start a new file after this many seconds (0: never)",
+    )
+    parser.add_argument(
+        "--duration", type=_seconds, metavar="S", help="stop after this many seconds"
+    )
+    parser.add_argument(
+        "--use-sim-time", action="store_true", help="log times from /clock instead of the wall"
+    )
+
+
+def run(args: argparse.Namespace) -> int:
+    from feeder_ros.bag.errors import BagError
+    from feeder_ros.recording import RecordingOptions, record
+
+    if args.chunk_size <= 0:
+        raise CommandError("--chunk-size must be > 0")
+    output = args.output or Path(time.strftime("feeder_%Y%m%d-%H%M%S"))
+    options = RecordingOptions(
+        output=output,
+        topics=tuple(args.topics),
+        namespace=args.namespace,
+        compression=args.compression,
+        chunk_size=args.chunk_size,
+        max_file_size=args.max_bag_size,
+        max_file_duration_s=args.max_bag_duration,
+        duration_s=args.duration,
+        use_sim_time=args.use_sim_time,
+    )
+    try:
+        summary = record(options, on_ready=lambda: print(f"recording into {output}", flush=True))
+    except BagError as error:
+        raise CommandError(str(error)) from None
+    print(summary.text(), flush=True)
+    return 0

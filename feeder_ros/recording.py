@@ -1,0 +1,265 @@
+"""The rclpy recorder behind ``feeder record``: serialized messages from the graph into a bag.
+
+Topics are discovered on the graph (every ``discovery_period_s``): all topics under a namespace
+(plus ``/diagnostics``), or an explicit list. Each is subscribed with ``raw=True`` (the CDR bytes
+are written as they arrive, nothing is deserialised) and a QoS compatible with every publisher
+(reliable only if all publishers are, transient-local only if all are); the publishers' offered
+QoS profiles are stored per topic as rosbag2 does. The bag format, chunking, compression, splitting
+and crash safety are :class:`~feeder_ros.bag.BagWriter`'s.
+
+Log times are the node clock at reception (``use_sim_time`` gives simulated time). The recording
+stops on Ctrl-C or SIGTERM (rclpy's signal handlers shut the context down) or after ``duration_s``;
+in every case the bag is closed and its ``metadata.yaml`` final.
+"""
+
+from __future__ import annotations
+
+import importlib
+import time
+from collections.abc import Callable, Sequence
+from dataclasses import dataclass, field
+from pathlib import Path
+from typing import Any
+
+import rclpy
+import yaml
+from rclpy.duration import Duration
+from rclpy.executors import ExternalShutdownException, SingleThreadedExecutor
+from rclpy.node import Node
+from rclpy.parameter import Parameter
+from rclpy.qos import (
+    DurabilityPolicy,
+    HistoryPolicy,
+    QoSProfile,
+    ReliabilityPolicy,
+)
+from rclpy.topic_endpoint_info import TopicEndpointInfo
+
+from feeder_ros.bag import BagWriter
+from feeder_ros.bag.errors import BagError
+
+__all__ = [
+    "IGNORED_TOPICS",
+    "RecordingOptions",
+    "RecordingSummary",
+    "TopicRecorder",
+    "offered_qos_yaml",
+    "record",
+    "selected",
+]
+
+IGNORED_TOPICS = frozenset({"/rosout", "/parameter_events"})
+ALWAYS_WITH_NAMESPACE = ("/diagnostics",)
+SUBSCRIPTION_DEPTH = 1000  # a second of history at 1 kHz before a slow write drops messages
+_INFINITE_NS = 0x7FFF_FFFF_FFFF_FFFF
+
+
+@dataclass(frozen=True)
+class RecordingOptions:
+    """What to record and how to write it (see ``feeder record --help``)."""
+
+    output: Path
+    topics: tuple[str, ...] = ()  # explicit topic names; empty: everything under ``namespace``
+    namespace: str = "/"
+    compression: str = "zstd"
+    chunk_size: int = 1 << 20
+    max_file_size: int = 0
+    max_file_duration_s: float = 0.0
+    duration_s: float | None = None
+    use_sim_time: bool = False
+    discovery_period_s: float = 0.5
+
+
+@dataclass
+class RecordingSummary:
+    output: Path
+    counts: dict[str, int] = field(default_factory=dict)  # topic -> messages written
+    types: dict[str, str] = field(default_factory=dict)
+    skipped: dict[str, str] = field(default_factory=dict)  # topic -> why it is not recorded
+    files: list[Path] = field(default_factory=list)
+    stopped_by: str = ""
+
+    def text(self) -> str:
+        lines = [
+            f"recorded {sum(self.counts.values())} message(s) on {len(self.counts)} topic(s) "
+            f"into {self.output} ({len(self.files)} file(s)); stopped by {self.stopped_by}"
+        ]
+        lines += [f"  {t}: {n} ({self.types[t]})" for t, n in sorted(self.counts.items())]
+        lines += [f"  not recorded: {t}: {why}" for t, why in sorted(self.skipped.items())]
+        return "\n".join(lines)
+
+
+def _namespace(ns: str) -> str:
+    ns = "/" + ns.strip("/")
+    return ns
+
+
+def selected(name: str, options: RecordingOptions) -> bool:
+    """Whether a topic of the graph is recorded under ``options``."""
+    if options.topics:
+        wanted = {
+            t if t.startswith("/") else f"{_namespace(options.namespace).rstrip('/')}/{t}"
+            for t in options.topics
+        }
+        return name in wanted
+    if name in IGNORED_TOPICS:
+        return False
+    ns = _namespace(options.namespace)
+    return ns == "/" or name.startswith(ns + "/") or name in ALWAYS_WITH_NAMESPACE
+
+
+def _duration(value: Duration) -> dict[str, int]:
+    ns = int(value.nanoseconds)
+    if ns >= _INFINITE_NS or ns < 0:
+        ns = _INFINITE_NS
+    return {"sec": ns // 1_000_000_000, "nsec": ns % 1_000_000_000}
+
+
+def _policy(value: Any) -> str:
+    return str(getattr(value, "name", value)).lower()
+
+
+def offered_qos_yaml(publishers: Sequence[TopicEndpointInfo]) -> str:
+    """The publishers' QoS profiles in rosbag2's ``offered_qos_profiles`` YAML form."""
+    profiles = []
+    for info in publishers:
+        q = info.qos_profile
+        profiles.append(
+            {
+                "history": _policy(q.history),
+                "depth": int(q.depth),
+                "reliability": _policy(q.reliability),
+                "durability": _policy(q.durability),
+                "deadline": _duration(q.deadline),
+                "lifespan": _duration(q.lifespan),
+                "liveliness": _policy(q.liveliness),
+                "liveliness_lease_duration": _duration(q.liveliness_lease_duration),
+                "avoid_ros_namespace_conventions": bool(q.avoid_ros_namespace_conventions),
+            }
+        )
+    return str(yaml.safe_dump(profiles, sort_keys=False)) if profiles else "[]\n"
+
+
+def subscription_qos(publishers: Sequence[TopicEndpointInfo]) -> QoSProfile:
+    """A QoS that matches every publisher: reliable / transient local only if all offer it."""
+    qos = [p.qos_profile for p in publishers]
+    reliable = bool(qos) and all(q.reliability == ReliabilityPolicy.RELIABLE for q in qos)
+    latched = bool(qos) and all(q.durability == DurabilityPolicy.TRANSIENT_LOCAL for q in qos)
+    return QoSProfile(
+        history=HistoryPolicy.KEEP_LAST,
+        depth=SUBSCRIPTION_DEPTH,
+        reliability=ReliabilityPolicy.RELIABLE if reliable else ReliabilityPolicy.BEST_EFFORT,
+        durability=DurabilityPolicy.TRANSIENT_LOCAL if latched else DurabilityPolicy.VOLATILE,
+    )
+
+
+def message_class(type_name: str) -> Any:
+    """The Python class of ``pkg/msg/Type`` (the subscription needs it even for raw bytes)."""
+    package, _, name = type_name.replace("/msg/", "/").partition("/")
+    module = importlib.import_module(f"{package}.msg")
+    return getattr(module, name)
+
+
+class TopicRecorder(Node):
+    """Subscribes (raw) to the selected topics as they appear and writes what arrives."""
+
+    def __init__(
+        self, writer: BagWriter, options: RecordingOptions, summary: RecordingSummary
+    ) -> None:
+        super().__init__(
+            "feeder_recorder",
+            parameter_overrides=[Parameter("use_sim_time", value=options.use_sim_time)],
+        )
+        self._writer = writer
+        self._options = options
+        self._summary = summary
+        self.discover()
+        self.create_timer(options.discovery_period_s, self.discover)
+
+    def discover(self) -> None:
+        for name, types in self.get_topic_names_and_types():
+            if (
+                name in self._summary.counts
+                or name in self._summary.skipped
+                or not selected(name, self._options)
+            ):
+                continue
+            if len(types) != 1:
+                self._skip(name, f"several types on one topic: {', '.join(types)}")
+                continue
+            publishers = self.get_publishers_info_by_topic(name)
+            if not publishers:
+                continue  # only subscribers so far: wait for a publisher (and its QoS)
+            try:
+                cls = message_class(types[0])
+                self._writer.add_topic(name, types[0], offered_qos_yaml(publishers))
+            except (ImportError, AttributeError, BagError, OSError) as error:
+                self._skip(name, f"cannot record type {types[0]}: {error}")
+                continue
+            self._summary.counts[name] = 0
+            self._summary.types[name] = types[0]
+            self.create_subscription(
+                cls, name, self._callback(name), subscription_qos(publishers), raw=True
+            )
+            self.get_logger().info(f"recording {name} ({types[0]})")
+
+    def _skip(self, name: str, why: str) -> None:
+        self._summary.skipped[name] = why
+        self.get_logger().warning(f"not recording {name}: {why}")
+
+    def _callback(self, topic: str) -> Callable[[bytes], None]:
+        counts = self._summary.counts
+        write = self._writer.write
+        clock = self.get_clock()
+
+        def on_message(data: bytes) -> None:
+            write(topic, data, clock.now().nanoseconds)
+            counts[topic] += 1
+
+        return on_message
+
+
+def record(
+    options: RecordingOptions,
+    args: Sequence[str] | None = None,
+    on_ready: Callable[[], None] | None = None,
+) -> RecordingSummary:
+    """Record until Ctrl-C, SIGTERM or ``options.duration_s``; the bag is closed in every case.
+    Raises ``BagError`` if the bag cannot be created (e.g. the output directory exists)."""
+    writer = BagWriter(
+        options.output,
+        compression=options.compression,
+        chunk_size=options.chunk_size,
+        max_file_size=options.max_file_size,
+        max_file_duration_ns=int(options.max_file_duration_s * 1e9),
+    )
+    summary = RecordingSummary(options.output)
+    try:
+        with rclpy.init(args=list(args) if args is not None else None) as init:
+            context = init.context
+            node = TopicRecorder(writer, options, summary)
+            executor = SingleThreadedExecutor(context=context)
+            executor.add_node(node)
+            if on_ready is not None:
+                on_ready()
+            end = None if options.duration_s is None else time.monotonic() + options.duration_s
+            summary.stopped_by = "shutdown"
+            try:
+                while context.ok():
+                    if end is not None and time.monotonic() >= end:
+                        summary.stopped_by = f"--duration {options.duration_s:g} s"
+                        break
+                    executor.spin_once(timeout_sec=0.05)
+                else:
+                    summary.stopped_by = "signal"
+            except (KeyboardInterrupt, ExternalShutdownException):
+                summary.stopped_by = "signal"
+            finally:
+                executor.remove_node(node)
+                node.destroy_node()
+    except (KeyboardInterrupt, ExternalShutdownException):
+        summary.stopped_by = "signal"
+    finally:
+        writer.close()
+    summary.files = writer.files
+    return summary

@@ -1,0 +1,439 @@
+"""``feeder_ros.bag.analysis`` on bags written from code with known contents (real ROS messages
+serialized by rclpy): every segment value is computed by hand from what was written."""
+
+from __future__ import annotations
+
+import json
+import math
+from pathlib import Path
+from typing import Any
+
+import numpy as np
+import pytest
+from diagnostic_msgs.msg import DiagnosticArray, DiagnosticStatus
+from mcap.reader import make_reader
+from rclpy.serialization import serialize_message
+from sensor_msgs.msg import Imu
+from std_msgs.msg import String
+
+from feeder_ros.bag import BagWriter, analysis
+from feeder_ros.bag.analysis import AnalysisError, analyze_bag, analyze_bags
+from feeder_ros.bag.report import format_summary, write_outputs
+from feeder_ros.msg import (
+    CarrierState,
+    CarrierStateBatch,
+    DriveCommand,
+    PartExit,
+    PartSensorEvent,
+    PartState,
+    PartStateArray,
+    VehicleEstimate,
+)
+
+T0 = 1_750_000_000_000_000_000
+MS = 1_000_000
+S = 1_000_000_000
+
+# (start s, end s, frequency Hz, amplitude N): the drive plan of the standard test bag
+PLAN = [(0.0, 2.0, 30.0, 20.0), (2.0, 4.0, 40.0, 20.0), (4.0, 5.0, 40.0, 0.0)]
+# per segment: estimator speed, truth speeds of the two parts, truth phases, exits
+EST_SPEED = [0.001, 0.003, 0.0]
+EST_SLIP = [0.25, 0.5, 0.0]
+TRUTH = [((0.002, 0.004), (0, 1)), ((0.006, 0.010), (1, 2)), ((0.0, 0.0), (0, 0))]
+EXITS = [3, 6, 0]
+
+
+def stamp(message: Any, t_ns: int) -> Any:
+    if not hasattr(message, "header"):
+        return message
+    message.header.stamp.sec = t_ns // S
+    message.header.stamp.nanosec = t_ns % S
+    return message
+
+
+def cdr(message: Any) -> bytes:
+    return bytes(serialize_message(message))
+
+
+def segment_at(t_s: float) -> int:
+    return next(i for i, (lo, hi, _, _) in enumerate(PLAN) if lo <= t_s < hi)
+
+
+def write_feeder_bag(
+    path: Path,
+    ns: str = "/cell_a",
+    chunk_size: int = 1 << 20,
+    batches: bool = False,
+    carrier: bool = True,
+    extras: bool = True,
+) -> None:
+    """5 s of a feeder: carrier state (1 kHz), estimate and part states (100 Hz), sensor events,
+    exits, drive commands, diagnostics, plus unrelated topics; all stamped on exact grids."""
+    with BagWriter(path, chunk_size=chunk_size) as w:
+        topics = {
+            "state": (f"{ns}/carrier/state", "feeder_ros/msg/CarrierState"),
+            "batch": (f"{ns}/carrier/state_batch", "feeder_ros/msg/CarrierStateBatch"),
+            "est": (f"{ns}/estimate", "feeder_ros/msg/VehicleEstimate"),
+            "parts": (f"{ns}/parts/state", "feeder_ros/msg/PartStateArray"),
+            "events": (f"{ns}/parts/sensor_events", "feeder_ros/msg/PartSensorEvent"),
+            "exit": (f"{ns}/parts/exit", "feeder_ros/msg/PartExit"),
+            "cmd": (f"{ns}/drive/command", "feeder_ros/msg/DriveCommand"),
+            "diag": ("/diagnostics", "diagnostic_msgs/msg/DiagnosticArray"),
+            "imu": (f"{ns}/imu", "sensor_msgs/msg/Imu"),
+            "chatter": ("/chatter", "std_msgs/msg/String"),
+        }
+        for name, type_name in topics.values():
+            w.add_topic(name, type_name)
+
+        def put(key: str, message: Any, t_ns: int) -> None:
+            w.write(topics[key][0], cdr(stamp(message, t_ns)), t_ns + 50_000)
+
+        exits_done = [0, 0, 0]
+        total_exits = 0
+        for k in range(5000):  # 1 ms steps
+            t_ns = T0 + k * MS
+            t_s = k * 1e-3
+            seg = segment_at(t_s)
+            _, _, freq, amp = PLAN[seg]
+            if k in (0, 2000, 4000):
+                put("cmd", DriveCommand(enabled=amp > 0, frequency_hz=freq, amplitude_n=amp), t_ns)
+            if carrier and not batches:
+                put(
+                    "state",
+                    CarrierState(drive_frequency_hz=freq, drive_amplitude_n=amp, velocity_mps=0.1),
+                    t_ns,
+                )
+            if carrier and batches and k % 10 == 0:
+                message = CarrierStateBatch(sample_period_s=1e-3)
+                message.drive_frequency_hz = [
+                    PLAN[segment_at((k + j) * 1e-3)][2] for j in range(10)
+                ]
+                message.drive_amplitude_n = [PLAN[segment_at((k + j) * 1e-3)][3] for j in range(10)]
+                put("batch", message, t_ns)
+            if extras:
+                put("imu", Imu(), t_ns)
+            if k % 10 == 0:
+                # the estimator: status OK except the first 100 ms of each segment (SETTLING,
+                # garbage values that the analysis must ignore)
+                settling = (k % 2000) < 100 and k < 4000
+                estimate = VehicleEstimate(
+                    mean_speed_mps=99.0 if settling else EST_SPEED[seg],
+                    slip_fraction=0.9 if settling else EST_SLIP[seg],
+                    status=VehicleEstimate.STATUS_SETTLING if settling else 0,
+                )
+                put("est", estimate, t_ns)
+                speeds, phases = TRUTH[seg]
+                parts = PartStateArray()
+                for i in range(2):
+                    parts.parts.append(
+                        PartState(
+                            part_id=i + 1, velocity_mps=speeds[i], phase=phases[i], on_track=True
+                        )
+                    )
+                parts.parts.append(PartState(part_id=9, velocity_mps=5.0, phase=1, on_track=False))
+                put("parts", parts, t_ns)
+            if k % 100 == 50 and exits_done[seg] < EXITS[seg]:
+                exits_done[seg] += 1
+                total_exits += 1
+                put("exit", PartExit(part_id=total_exits, parts_out_total=total_exits), t_ns)
+            if extras and k % 1000 == 0:
+                put("chatter", String(data="hello"), t_ns)
+        # sensor transits: part 5 passes sensor 0 (0.10 m) at 0.5 s and sensor 1 (0.25 m) at
+        # 0.8 s (0.5 m/s, segment 0); part 6 from 2.5 s to 3.0 s (0.3 m/s, segment 1)
+        for part, t0, t1 in ((5, 500, 800), (6, 2500, 3000)):
+            for sensor, pos, t_ms in ((0, 0.10, t0), (1, 0.25, t1)):
+                for present, dt in ((True, 0), (False, 20)):
+                    event = PartSensorEvent(
+                        sensor_index=sensor, sensor_position_m=pos, part_id=part, present=present
+                    )
+                    put("events", event, T0 + (t_ms + dt) * MS)
+        # diagnostics at 1 Hz: "drive" OK, WARN at 2 s, OK again at 4 s; "sensor" always OK
+        for second in range(5):
+            level = DiagnosticStatus.WARN if 2 <= second < 4 else DiagnosticStatus.OK
+            array = DiagnosticArray()
+            array.status = [
+                DiagnosticStatus(level=level, name="feeder: drive", message=f"s{second}"),
+                DiagnosticStatus(level=DiagnosticStatus.OK, name="feeder: sensor", message="ok"),
+            ]
+            put("diag", array, T0 + second * S + 1)
+
+
+def check_standard(result: Any, drive_source: str = "carrier state", end_s: float = 4.999) -> None:
+    assert result.ok
+    assert result.drive_source == drive_source
+    assert len(result.segments) == 3
+    for seg, (lo, hi, freq, amp) in zip(result.segments, PLAN, strict=True):
+        i = seg.index
+        assert seg.start_s == pytest.approx(lo, abs=1e-9)
+        # the last segment ends at the last message (sensor/diag events are earlier)
+        assert seg.end_s == pytest.approx(hi if i < 2 else end_s, abs=1e-9)
+        assert (seg.frequency_hz, seg.amplitude_n) == ((freq, amp) if amp else (0.0, 0.0))
+        assert seg.speed_estimate_mps == pytest.approx(EST_SPEED[i], rel=1e-12)
+        assert seg.slip_estimate == pytest.approx(EST_SLIP[i], rel=1e-12)
+        speeds, phases = TRUTH[i]
+        assert seg.speed_ground_truth_mps == pytest.approx(np.mean(speeds), rel=1e-12)
+        assert seg.slip_ground_truth == pytest.approx(np.mean([p != 0 for p in phases]))
+        assert seg.parts_exited == EXITS[i]
+        assert seg.feed_rate_per_min == pytest.approx(EXITS[i] / (seg.duration_s / 60.0))
+    assert result.segments[0].speed_sensors_mps == pytest.approx(0.5, rel=1e-9)
+    assert result.segments[1].speed_sensors_mps == pytest.approx(0.3, rel=1e-9)
+    assert math.isnan(result.segments[2].speed_sensors_mps)
+    assert [s.transits for s in result.segments] == [1, 1, 0]
+    # best speed: ground truth first
+    assert result.segments[1].speed_mps == pytest.approx(0.008)
+    # sweep: two frequencies at 20 N (the "off" segment is not an operating point)
+    points = [(p.amplitude_n, p.frequency_hz) for p in result.frequency_response]
+    assert points == [(20.0, 30.0), (20.0, 40.0)]
+    assert result.frequency_response[1].speed_mps == pytest.approx(0.008)
+    changes = [(round(d.t_s, 6), d.name, d.level_name) for d in result.diagnostics]
+    assert changes == [
+        (0.0, "feeder: drive", "OK"),
+        (0.0, "feeder: sensor", "OK"),
+        (2.0, "feeder: drive", "WARN"),
+        (4.0, "feeder: drive", "OK"),
+    ]
+
+
+def test_segments_speeds_slip_feed_rate_and_diagnostics(tmp_path: Path) -> None:
+    write_feeder_bag(tmp_path / "bag")
+    result = analyze_bag(tmp_path / "bag")
+    check_standard(result)
+    assert result.messages["feeder_ros/msg/CarrierState"] == 5000
+    assert result.topics["feeder_ros/msg/VehicleEstimate"] == ["/cell_a/estimate"]
+    assert "sensor_msgs/msg/Imu" not in result.messages  # unrelated topics are not decoded
+    assert result.problems == []
+    assert not result.cut_short
+
+
+@pytest.mark.parametrize("chunk_size", [2048, 64 << 10])
+def test_results_do_not_depend_on_chunking(
+    tmp_path: Path, chunk_size: int, monkeypatch: pytest.MonkeyPatch
+) -> None:
+    """Streaming: samples are reduced between chunks (here at every chunk boundary), once the
+    drive timeline has passed them; the pending buffer stays small."""
+    write_feeder_bag(tmp_path / "bag", chunk_size=chunk_size, ns="/remapped/feeder_7")
+    monkeypatch.setattr(analysis, "_FLUSH_BATCH", 0)
+    peak = [0]
+    flush = analysis._Accumulator.flush
+
+    def watched(self: Any, final: bool = False) -> None:
+        peak[0] = max(peak[0], self.pending_count)
+        flush(self, final)
+
+    monkeypatch.setattr(analysis._Accumulator, "flush", watched)
+    check_standard(analyze_bag(tmp_path / "bag"))
+    if chunk_size == 2048:
+        assert 0 < peak[0] < 200  # of 3012 metric samples
+
+
+def test_single_mcap_file_and_state_batches(tmp_path: Path) -> None:
+    write_feeder_bag(tmp_path / "bag", batches=True)
+    result = analyze_bag(tmp_path / "bag" / "bag_0.mcap")
+    check_standard(result)
+    assert result.messages["feeder_ros/msg/CarrierStateBatch"] == 500
+
+
+def test_drive_commands_alone_give_the_segments(tmp_path: Path) -> None:
+    write_feeder_bag(tmp_path / "bag", carrier=False)
+    result = analyze_bag(tmp_path / "bag")
+    check_standard(result, drive_source="drive command", end_s=4.99)  # last: 100 Hz topics
+
+
+def test_short_segments_are_transient(tmp_path: Path) -> None:
+    write_feeder_bag(tmp_path / "bag")
+    result = analyze_bag(tmp_path / "bag", min_segment_s=1.5)
+    assert [s.frequency_hz for s in result.segments] == [30.0, 40.0]
+    assert result.transient_segments == 1
+
+
+def test_no_sweep_without_two_frequencies(tmp_path: Path) -> None:
+    path = tmp_path / "bag"
+    with BagWriter(path) as w:
+        w.add_topic("/f/carrier/state", "feeder_ros/msg/CarrierState")
+        for k in range(3000):
+            amp = 10.0 if k < 1500 else 30.0
+            message = CarrierState(drive_frequency_hz=25.0, drive_amplitude_n=amp)
+            w.write("/f/carrier/state", cdr(stamp(message, T0 + k * MS)), T0 + k * MS)
+    result = analyze_bag(path)
+    assert [(s.frequency_hz, s.amplitude_n) for s in result.segments] == [
+        (25.0, 10.0),
+        (25.0, 30.0),
+    ]
+    assert result.frequency_response == []
+    assert math.isnan(result.segments[0].speed_mps)
+
+
+def test_log_time_is_used_where_the_stamp_is_zero(tmp_path: Path) -> None:
+    path = tmp_path / "bag"
+    with BagWriter(path) as w:
+        w.add_topic("/exit", "feeder_ros/msg/PartExit")
+        for k in range(4):
+            w.write("/exit", cdr(PartExit(part_id=k)), T0 + k * 20 * S)
+    result = analyze_bag(path)
+    assert result.duration_s == pytest.approx(60.0)
+    assert result.drive_source == "none"
+    [segment] = result.segments
+    assert segment.frequency_hz is None
+    assert segment.parts_exited == 4
+    assert result.totals()["feed_rate_per_min"] == pytest.approx(4.0)
+
+
+def test_several_bags_and_outputs(tmp_path: Path) -> None:
+    write_feeder_bag(tmp_path / "one")
+    write_feeder_bag(tmp_path / "two", batches=True)
+    (tmp_path / "junk.mcap").write_bytes(b"not a bag at all")
+    results = analyze_bags([tmp_path / "one", tmp_path / "two", tmp_path / "junk.mcap"])
+    assert [r.ok for r in results] == [True, True, False]
+    assert "not an MCAP bag" in (results[2].error or "")
+    text = format_summary(results)
+    assert "comparison:" in text
+    assert "feeder: drive" in text
+    out = tmp_path / "out"
+    written = {p.name for p in write_outputs(results, out)}
+    assert {
+        "one_segments.csv",
+        "one_frequency_response.csv",
+        "one_diagnostics.csv",
+        "one_segments.png",
+        "one_frequency_response.png",
+        "two_segments.csv",
+        "comparison.csv",
+        "analysis.json",
+        "report.html",
+    } <= written
+    rows = (out / "one_segments.csv").read_text().splitlines()
+    assert rows[0].startswith("segment,start_s,end_s,frequency_hz,amplitude_n,speed_mm_s")
+    assert len(rows) == 4
+    assert rows[2].split(",")[3:5] == ["40.0", "20.0"]
+    assert float(rows[2].split(",")[5]) == pytest.approx(8.0)
+    document = json.loads((out / "analysis.json").read_text())
+    assert [b["error"] is None for b in document["bags"]] == [True, True, False]
+    assert document["bags"][0]["segments"][0]["speed_estimate_mps"] == pytest.approx(0.001)
+    assert document["bags"][0]["segments"][2]["speed_sensors_mps"] is None  # NaN -> null
+    page = (out / "report.html").read_text()
+    assert page.count("data:image/png;base64,") == 4
+    assert "src='http" not in page
+    assert 'src="http' not in page
+    assert (out / "one_segments.png").read_bytes()[:8] == b"\x89PNG\r\n\x1a\n"
+
+
+# ------------------------------------------------------------------------------- bad input
+
+
+def test_not_a_bag(tmp_path: Path) -> None:
+    (tmp_path / "x.mcap").write_bytes(b"\x00" * 100)
+    with pytest.raises(AnalysisError, match="not an MCAP bag"):
+        analyze_bag(tmp_path / "x.mcap")
+    with pytest.raises(FileNotFoundError, match="no bag at"):
+        analyze_bag(tmp_path / "missing")
+
+
+def test_empty_bag(tmp_path: Path) -> None:
+    with BagWriter(tmp_path / "bag") as w:
+        w.add_topic("/f/carrier/state", "feeder_ros/msg/CarrierState")
+    with pytest.raises(AnalysisError, match="empty bag"):
+        analyze_bag(tmp_path / "bag")
+
+
+def test_no_feeder_topics(tmp_path: Path) -> None:
+    with BagWriter(tmp_path / "bag") as w:
+        w.add_topic("/chatter", "std_msgs/msg/String")
+        w.write("/chatter", cdr(String(data="x")), T0)
+    with pytest.raises(
+        AnalysisError, match=r"no feeder topics \(found /chatter \(std_msgs/msg/String\)\)"
+    ):
+        analyze_bag(tmp_path / "bag")
+
+
+def test_truncated_file_gives_partial_results(tmp_path: Path) -> None:
+    write_feeder_bag(tmp_path / "bag", chunk_size=8192, extras=False)
+    mcap = tmp_path / "bag" / "bag_0.mcap"
+    data = mcap.read_bytes()
+    mcap.write_bytes(data[: len(data) // 2])
+    result = analyze_bag(tmp_path / "bag")
+    assert result.cut_short
+    assert any("[cut_short]" in p for p in result.problems)
+    assert 0 < result.duration_s < 5.0
+    assert result.segments[0].frequency_hz == 30.0
+    assert result.segments[0].speed_estimate_mps == pytest.approx(0.001)
+
+
+def test_corrupt_chunk_is_named_and_the_rest_analysed(tmp_path: Path) -> None:
+    write_feeder_bag(tmp_path / "bag", chunk_size=8192, extras=False)
+    mcap = tmp_path / "bag" / "bag_0.mcap"
+    with mcap.open("rb") as stream:
+        summary = make_reader(stream).get_summary()
+    assert summary is not None
+    chunks = sorted(summary.chunk_indexes, key=lambda c: c.chunk_start_offset)
+    middle = chunks[len(chunks) // 2]  # zero 64 bytes inside its compressed records
+    data = bytearray(mcap.read_bytes())
+    at = middle.chunk_start_offset + middle.chunk_length // 2
+    data[at : at + 64] = bytes(64)
+    mcap.write_bytes(bytes(data))
+    result = analyze_bag(tmp_path / "bag")
+    corrupt = [p for p in result.problems if p.startswith("[corrupt_chunk]")]
+    assert len(corrupt) == 1
+    assert f"byte {middle.chunk_start_offset}" in corrupt[0]
+    assert [s.frequency_hz for s in result.segments][:2] == [30.0, 40.0]
+    assert result.segments[0].speed_ground_truth_mps == pytest.approx(0.003)
+
+
+def test_missing_metadata_yaml(tmp_path: Path) -> None:
+    write_feeder_bag(tmp_path / "bag")
+    (tmp_path / "bag" / "metadata.yaml").unlink()
+    result = analyze_bag(tmp_path / "bag")
+    check_standard(result)
+    assert any("[missing_metadata]" in p for p in result.problems)
+
+
+def test_unrelated_unknown_types_are_ignored(tmp_path: Path) -> None:
+    path = tmp_path / "bag"
+    with BagWriter(path) as w:
+        w.add_topic("/f/parts/exit", "feeder_ros/msg/PartExit")
+        w.add_topic(
+            "/other", "acme_msgs/msg/Gadget", schema_text="int32 x\n", type_hash="RIHS01_00"
+        )
+        for k in range(3):
+            w.write("/other", b"\x00\x01\x00\x00\x05\x00\x00\x00", T0 + k * S)
+            w.write("/f/parts/exit", cdr(stamp(PartExit(part_id=k), T0 + k * S)), T0 + k * S)
+    result = analyze_bag(path)
+    assert [s.parts_exited for s in result.segments] == [3]
+    assert result.problems == []
+
+
+OLD_PART_EXIT = (  # an old PartExit without part_id: its fields do not match ours
+    "std_msgs/Header header\nuint64 total\n"
+    + "=" * 80
+    + "\nMSG: std_msgs/Header\nbuiltin_interfaces/Time stamp\nstring frame_id\n"
+    + "=" * 80
+    + "\nMSG: builtin_interfaces/Time\nint32 sec\nuint32 nanosec\n"
+)
+
+
+def test_feeder_type_with_a_foreign_definition_is_left_out(tmp_path: Path) -> None:
+    path = tmp_path / "bag"
+    with BagWriter(path) as w:
+        w.add_topic("/f/parts/exit", "feeder_ros/msg/PartExit", schema_text=OLD_PART_EXIT)
+        w.add_topic("/f/carrier/state", "feeder_ros/msg/CarrierState")
+        for k in range(2000):
+            t_ns = T0 + k * MS
+            state = CarrierState(drive_frequency_hz=30.0, drive_amplitude_n=10.0)
+            w.write("/f/carrier/state", cdr(stamp(state, t_ns)), t_ns)
+            if k % 100 == 0:
+                w.write("/f/parts/exit", cdr(stamp(PartExit(part_id=1), t_ns)), t_ns)
+    result = analyze_bag(path)
+    [segment] = result.segments
+    assert (segment.frequency_hz, segment.amplitude_n) == (30.0, 10.0)
+    assert segment.parts_exited == 0
+    [problem] = result.problems
+    assert problem.startswith("[foreign_definition] feeder_ros/msg/PartExit")
+    assert "part_id" in problem
+
+
+def test_only_a_foreign_definition_is_an_error(tmp_path: Path) -> None:
+    path = tmp_path / "bag"
+    with BagWriter(path) as w:
+        w.add_topic("/f/parts/exit", "feeder_ros/msg/PartExit", schema_text=OLD_PART_EXIT)
+        w.write("/f/parts/exit", cdr(stamp(PartExit(part_id=1), T0)), T0)
+    with pytest.raises(AnalysisError, match=r"no usable feeder data; \[foreign_definition\]"):
+        analyze_bag(path)

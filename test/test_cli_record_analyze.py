@@ -1,0 +1,300 @@
+"""``feeder record`` and ``feeder analyze`` as real processes.
+
+The recorder records the installed ``platform_simulator`` in a namespace while a probe node listens
+to the same topics and drives the simulator; the bag is read back with rosbags and with the mcap
+package (mcap-ros2-support decoding) and compared message by message with what the probe received.
+A recorder killed with SIGKILL leaves a bag that ``feeder analyze`` reads and reports as cut short.
+"""
+
+from __future__ import annotations
+
+import json
+import signal
+import subprocess
+import sys
+import time
+from collections.abc import Iterator
+from contextlib import contextmanager
+from pathlib import Path
+from typing import Any
+
+import numpy as np
+import pytest
+import yaml
+from bag.test_analysis import write_feeder_bag
+from mcap.reader import make_reader
+from mcap_ros2.decoder import DecoderFactory
+from rclpy.node import Node
+from rclpy.qos import QoSProfile, ReliabilityPolicy
+from rclpy.serialization import deserialize_message
+from ros_test_tools import probe_node, running, wait_until
+from rosbags.rosbag2 import Reader as RosbagsReader
+
+from feeder_ros.bag import Bag, BagWarning, bag_info
+from feeder_ros.msg import CarrierState, DriveCommand, PartStateArray
+
+BIN = Path(sys.executable).parent
+FEEDER = str(BIN / "feeder")
+SIMULATOR = str(BIN / "platform_simulator")
+RELIABLE = QoSProfile(depth=1000, reliability=ReliabilityPolicy.RELIABLE)
+STATE_PERIOD_NS = 4_000_000  # state_rate_hz = 250
+
+
+def stamp_ns(message: Any) -> int:
+    stamp = message.header.stamp  # rclpy or mcap-ros2-support message
+    return int(stamp.sec) * 1_000_000_000 + int(stamp.nanosec)
+
+
+@contextmanager
+def simulator(ns: str) -> Iterator[subprocess.Popen[str]]:
+    command = [
+        SIMULATOR, "--ros-args", "-r", f"__ns:={ns}",
+        "-p", "state_rate_hz:=250.0", "-p", "imu_rate_hz:=250.0", "-p", "parts_rate_hz:=50.0",
+        "-p", "damping_ns_per_m:=30.0",
+    ]  # fmt: skip
+    with running(command) as process:
+        yield process
+    assert process.returncode == 0
+
+
+def drive(node: Node, ns: str, frequency_hz: float, amplitude_n: float) -> Any:
+    """Publish the drive command now (the simulator treats a command older than its timeout as a
+    stop, so the caller repeats it)."""
+    publisher = node.create_publisher(DriveCommand, f"{ns}/drive/command", 10)
+
+    def send() -> None:
+        message = DriveCommand(enabled=True, frequency_hz=frequency_hz, amplitude_n=amplitude_n)
+        message.header.stamp = node.get_clock().now().to_msg()
+        publisher.publish(message)
+
+    return send
+
+
+def test_record_a_simulator_and_read_the_bag_back(tmp_path: Path) -> None:
+    ns = "/rec_cli"
+    bag = tmp_path / "run1"
+    with simulator(ns), probe_node() as node:
+        states: list[CarrierState] = []
+        parts: list[PartStateArray] = []
+        node.create_subscription(CarrierState, f"{ns}/carrier/state", states.append, RELIABLE)
+        node.create_subscription(PartStateArray, f"{ns}/parts/state", parts.append, RELIABLE)
+        node.create_timer(0.05, drive(node, ns, 31.0, 40.0))  # the probe's thread sends
+        assert wait_until(lambda: bool(states) and states[-1].drive_amplitude_n == 40.0, 20)
+        recorder = [FEEDER, "record", "--namespace", ns, "-o", str(bag), "--chunk-size", "64K"]
+        with running(recorder) as process:
+            assert wait_until(lambda: (bag / "metadata.yaml").exists(), 20), process.poll()
+            time.sleep(4.0)  # discovery, then at least 3 s of data
+        assert process.returncode == 0, process.stdout.read() if process.stdout else ""
+        output = process.stdout.read() if process.stdout else ""
+        time.sleep(0.5)  # the probe goes on receiving after the recorder stopped
+
+    assert f"into {bag}" in output
+    assert "stopped by signal" in output
+    metadata = yaml.safe_load((bag / "metadata.yaml").read_text())["rosbag2_bagfile_information"]
+    topics = {t["topic_metadata"]["name"]: t for t in metadata["topics_with_message_count"]}
+    assert {f"{ns}/carrier/state", f"{ns}/imu", f"{ns}/parts/state"} <= set(topics)
+    assert all(name.startswith(ns + "/") or name == "/diagnostics" for name in topics)
+    state_meta = topics[f"{ns}/carrier/state"]["topic_metadata"]
+    assert state_meta["type"] == "feeder_ros/msg/CarrierState"
+    assert state_meta["offered_qos_profiles"][0]["reliability"] == "reliable"
+    imu_qos = topics[f"{ns}/imu"]["topic_metadata"]["offered_qos_profiles"][0]
+    assert imu_qos["reliability"] == "best_effort"  # the simulator's sensor-data QoS
+
+    # rosbags: every message, in order, deserialised by rclpy
+    recorded: dict[int, CarrierState] = {}
+    log_times = []
+    with RosbagsReader(bag) as reader:
+        assert reader.message_count == metadata["message_count"]
+        conns = [c for c in reader.connections if c.topic == f"{ns}/carrier/state"]
+        for _, log_ns, raw in reader.messages(connections=conns):
+            message = deserialize_message(raw, CarrierState)
+            recorded[stamp_ns(message)] = message
+            log_times.append(log_ns)
+    stamps = np.array(sorted(recorded))
+    assert len(stamps) == topics[f"{ns}/carrier/state"]["message_count"] > 500
+    assert np.all(np.diff(stamps) == STATE_PERIOD_NS), "reliable topic: none lost, none twice"
+    start = metadata["starting_time"]["nanoseconds_since_epoch"]
+    assert start <= min(log_times)
+    assert max(log_times) <= start + metadata["duration"]["nanoseconds"]
+
+    # what the probe received over the same stretch is exactly what was recorded
+    probe = {stamp_ns(m): m for m in states if stamps[0] <= stamp_ns(m) <= stamps[-1]}
+    assert sorted(probe) == list(stamps)
+    for t in stamps[:: max(1, len(stamps) // 200)]:
+        for name in ("displacement_m", "velocity_mps", "drive_frequency_hz", "drive_amplitude_n"):
+            assert getattr(recorded[t], name) == getattr(probe[t], name)
+    assert {recorded[t].drive_amplitude_n for t in stamps} == {40.0}
+
+    # the mcap package with mcap-ros2-support decodes the same messages from our schemas
+    decoded = []
+    for path in sorted(bag.glob("*.mcap")):
+        with path.open("rb") as stream:
+            reader = make_reader(stream, decoder_factories=[DecoderFactory()])
+            for _, channel, message, ros in reader.iter_decoded_messages(
+                topics=[f"{ns}/carrier/state", f"{ns}/parts/state"]
+            ):
+                if channel.topic.endswith("carrier/state"):
+                    decoded.append((stamp_ns(ros), ros.velocity_mps, message.log_time))
+    assert [d[0] for d in decoded] == list(stamps)
+    assert [d[1] for d in decoded] == [recorded[t].velocity_mps for t in stamps]
+    assert [d[2] for d in decoded] == log_times
+    received_parts = {stamp_ns(m) for m in parts}
+    info = bag_info(bag)
+    assert info.topics[f"{ns}/parts/state"].message_count > 50
+    assert not info.cut_short
+    assert info.problems == []
+
+    # feeder analyze: one driven segment at 31 Hz / 40 N with the ground-truth speed of the
+    # messages in the bag
+    out = tmp_path / "report"
+    result = subprocess.run(
+        [FEEDER, "analyze", str(bag), "--output", str(out)], capture_output=True, text=True
+    )
+    assert result.returncode == 0, result.stderr
+    document = json.loads((out / "analysis.json").read_text())
+    [analysis] = document["bags"]
+    driven = [s for s in analysis["segments"] if s["amplitude_n"] == 40.0]
+    assert [s["frequency_hz"] for s in driven] == [31.0]
+    with RosbagsReader(bag) as reader:
+        conns = [c for c in reader.connections if c.topic == f"{ns}/parts/state"]
+        velocities = []
+        for _, _, raw in reader.messages(connections=conns):
+            message = deserialize_message(raw, PartStateArray)
+            assert stamp_ns(message) in received_parts
+            if stamp_ns(message) >= stamps[0]:  # from the first carrier state on
+                velocities += [p.velocity_mps for p in message.parts if p.on_track]
+    assert len(velocities) > 50
+    assert np.isclose(driven[0]["speed_ground_truth_mps"], np.mean(velocities), rtol=1e-9)
+    assert (out / "report.html").read_text().count("data:image/png;base64,") >= 1
+
+
+def test_duration_topic_list_and_sigterm(tmp_path: Path) -> None:
+    ns = "/rec_cli_term"
+    with simulator(ns):
+        short = subprocess.run(
+            [FEEDER, "record", "carrier/state", "--namespace", ns, "--duration", "2.5",
+             "--max-bag-duration", "0.5", "--compression", "lz4", "-o", str(tmp_path / "short")],
+            capture_output=True, text=True, timeout=60,
+        )  # fmt: skip
+        assert short.returncode == 0, short.stderr
+        assert "stopped by --duration 2.5 s" in short.stdout
+        info = bag_info(tmp_path / "short")
+        assert list(info.topics) == [f"{ns}/carrier/state"]
+        assert info.message_count > 100
+        assert len(info.files) >= 3  # split every 0.5 s of log time
+        listed = yaml.safe_load((tmp_path / "short" / "metadata.yaml").read_text())
+        assert len(listed["rosbag2_bagfile_information"]["relative_file_paths"]) == len(info.files)
+        with RosbagsReader(tmp_path / "short") as reader:
+            assert sum(1 for _ in reader.messages()) == info.message_count
+            assert reader.message_count == info.message_count
+
+        process = subprocess.Popen(
+            [FEEDER, "record", "--namespace", ns, "-o", str(tmp_path / "term")],
+            stdout=subprocess.PIPE, stderr=subprocess.PIPE, text=True,
+        )  # fmt: skip
+        try:
+            assert wait_until(lambda: (tmp_path / "term" / "metadata.yaml").exists(), 20)
+            time.sleep(2.0)
+        finally:
+            process.send_signal(signal.SIGTERM)
+            stdout, _ = process.communicate(timeout=20)
+        assert process.returncode == 0
+        assert "stopped by signal" in stdout
+    bag = Bag(tmp_path / "term")
+    info = bag_info(bag)
+    assert not info.cut_short
+    assert info.problems == []
+    assert info.topics[f"{ns}/carrier/state"].message_count > 100
+    meta = yaml.safe_load((tmp_path / "term" / "metadata.yaml").read_text())
+    assert meta["rosbag2_bagfile_information"]["message_count"] == info.message_count
+
+
+def test_sigkilled_recorder_leaves_a_bag_reported_cut_short(tmp_path: Path) -> None:
+    ns = "/rec_cli_kill"
+    bag = tmp_path / "killed"
+    with simulator(ns), probe_node() as node:
+        node.create_timer(0.05, drive(node, ns, 29.6, 20.0))
+        command = [FEEDER, "record", "--namespace", ns, "-o", str(bag), "--chunk-size", "4K"]
+        process = subprocess.Popen(command, stdout=subprocess.DEVNULL, stderr=subprocess.DEVNULL)
+        try:
+            mcap = bag / "killed_0.mcap"
+            assert wait_until(lambda: mcap.exists() and mcap.stat().st_size > 100_000, 30)
+            time.sleep(1.0)
+        finally:
+            process.send_signal(signal.SIGKILL)
+            process.wait(timeout=10)
+        assert process.returncode == -signal.SIGKILL
+    result = subprocess.run([FEEDER, "analyze", str(bag)], capture_output=True, text=True)
+    assert result.returncode == 0, result.stderr
+    assert "CUT SHORT" in result.stdout
+    assert "[cut_short]" in result.stdout
+    with pytest.warns(BagWarning, match="cut_short"):
+        info = bag_info(Bag(bag))
+    assert info.cut_short
+    assert info.topics[f"{ns}/carrier/state"].message_count > 100
+
+
+def test_analyze_cli_outputs_and_bad_input(tmp_path: Path) -> None:
+    write_feeder_bag(tmp_path / "good")
+    (tmp_path / "junk.mcap").write_bytes(b"not a bag")
+    empty = tmp_path / "emptydir"
+    empty.mkdir()
+
+    bad = subprocess.run(
+        [FEEDER, "analyze", str(tmp_path / "junk.mcap"), str(empty)], capture_output=True, text=True
+    )
+    assert bad.returncode == 2
+    lines = bad.stderr.strip().splitlines()
+    assert len(lines) == 2
+    assert "junk.mcap" in lines[0]
+    assert "not an MCAP bag" in lines[0]
+    assert "no metadata.yaml and no .mcap file" in lines[1]
+
+    mixed = subprocess.run(
+        [FEEDER, "analyze", str(tmp_path / "good"), str(tmp_path / "junk.mcap"), "--progress",
+         "--output", str(tmp_path / "out")],
+        capture_output=True, text=True,
+    )  # fmt: skip
+    assert mixed.returncode == 0, mixed.stderr
+    assert "comparison:" in mixed.stdout
+    assert "100%" in mixed.stderr  # the progress bar
+    assert "not an MCAP bag" in mixed.stderr
+    rows = (tmp_path / "out" / "comparison.csv").read_text().splitlines()
+    assert rows[1].split(",")[:2] == [str(tmp_path / "good"), "ok"]
+    assert rows[2].split(",")[1] == "error"
+    assert (tmp_path / "out" / "good_segments.csv").is_file()
+
+
+def test_bench_bag_quick_run_writes_its_report(tmp_path: Path) -> None:
+    """The benchmark still runs (``--quick``, small bags); its timings are not checked here."""
+    report = tmp_path / "bench.md"
+    completed = subprocess.run(
+        [sys.executable, str(Path(__file__).resolve().parents[1] / "bench" / "bench_bag.py"),
+         "--quick", "--output", str(report), "--cache", str(tmp_path / "cache")],
+        capture_output=True, text=True, timeout=600, check=False,
+    )  # fmt: skip
+    assert completed.returncode == 0, completed.stderr[-2000:]
+    text = report.read_text(encoding="utf-8")
+    for row in (
+        "| feeder_ros.bag read_tables (all fields) | 40,000 |",
+        "| mcap + mcap-ros2-support 0.6.0 | 10,000 |",
+        "| mcap + mcap-ros2-support-fast 0.8.0 | 10,000 |",
+        "| rosbags Reader + deserialize_cdr | 10,000 |",
+    ):
+        assert row in text
+    assert "| 6 | yes |" in text  # the sweep's six segments, estimator speeds as written
+
+
+def test_record_refuses_an_existing_bag(tmp_path: Path) -> None:
+    existing = tmp_path / "bag"
+    existing.mkdir()
+    (existing / "keep.txt").write_text("mine")
+    result = subprocess.run(
+        [FEEDER, "record", "-o", str(existing), "--duration", "1"], capture_output=True, text=True
+    )
+    assert result.returncode == 2
+    assert result.stderr.strip().splitlines() == [
+        f"feeder record: error: bag writer {existing}: the bag path exists and is not an empty "
+        "directory"
+    ]
+    assert sorted(p.name for p in existing.iterdir()) == ["keep.txt"]
