@@ -46,15 +46,14 @@ $(STAMPS)/package: $(STAMPS)/interfaces setup.py
 # numba compiles the exact solver on first use; do it once here (cached next to the sources)
 # so that nodes and tests start in a second instead of paying the compile each time.
 $(STAMPS)/solver-cache: $(STAMPS)/package $(wildcard feeder_ros/physics/*.py)
-	$(VENV)/bin/feeder sim --duration 0.05 --rate 1000 --parts 2 > /dev/null
+	$(PY) tools/warm_solver_cache.py
 	@touch $@
 
 install: $(STAMPS)/package $(STAMPS)/solver-cache
 
 $(STAMPS)/workspace: $(STAMPS)/interfaces setup.py $(PACKAGE_SOURCES) tools/build_workspace.sh
 	VENV=$(CURDIR)/$(VENV) tools/build_workspace.sh $(CURDIR)/$(WS)
-	source $(WS)/install/local_setup.sh && \
-		$(WS)/install/feeder_ros/lib/feeder_ros/feeder sim --duration 0.05 --rate 1000 > /dev/null
+	source $(WS)/install/local_setup.sh && cd /tmp && $(CURDIR)/$(PY) $(CURDIR)/tools/warm_solver_cache.py
 	@touch $@
 
 workspace: $(STAMPS)/workspace

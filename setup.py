@@ -14,6 +14,7 @@ PACKAGE = "feeder_ros"
 # the same executables under <prefix>/lib/feeder_ros for `ros2 run`.
 CONSOLE_SCRIPTS = [
     "feeder = feeder_ros.cli.main:main",
+    "drive_interface = feeder_ros.nodes.drive_interface:main",
     "manual_drive = feeder_ros.nodes.manual_drive:main",
     "platform_simulator = feeder_ros.nodes.platform_simulator:main",
     "vehicle_estimator = feeder_ros.nodes.vehicle_estimator:main",

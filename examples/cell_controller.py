@@ -73,7 +73,7 @@ class CellController(Node):
     # -- helpers -------------------------------------------------------------------------------
     def log(self, step: str, **details: Any) -> None:
         elapsed = time.monotonic() - self._start_time
-        entry = {"t_s": round(elapsed, 2), "step": step, **details}
+        entry = {"t_s": round(elapsed, 2), "wall_s": time.time(), "step": step, **details}
         self.timeline.append(entry)
         extra = ", ".join(f"{k}={v}" for k, v in details.items())
         print(f"[controller {elapsed:6.1f} s] {step}" + (f": {extra}" if extra else ""), flush=True)

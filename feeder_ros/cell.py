@@ -99,8 +99,21 @@ def _mapping(value: object, where: str) -> Mapping[str, Any]:
     return value
 
 
+def _flatten(values: Mapping[str, Any], prefix: str = "") -> dict[str, Any]:
+    """Nested parameter groups (``plant: {damping_ns_per_m: 200}``) as dotted names, the form
+    ROS gives them (``plant.damping_ns_per_m``), so that a cell override replaces the value."""
+    flat: dict[str, Any] = {}
+    for key, value in values.items():
+        name = f"{prefix}{key}"
+        if isinstance(value, Mapping):
+            flat.update(_flatten(value, f"{name}."))
+        else:
+            flat[name] = value
+    return flat
+
+
 def _section(path: Path, name: str, where: str) -> dict[str, Any]:
-    """The ros__parameters of node section ``name`` of a ROS parameter file."""
+    """The ros__parameters of node section ``name`` of a ROS parameter file, flattened."""
     try:
         document = yaml.safe_load(path.read_text(encoding="utf-8"))
     except OSError as error:
@@ -111,7 +124,7 @@ def _section(path: Path, name: str, where: str) -> dict[str, Any]:
         if isinstance(document, Mapping) and key in document:
             section = document[key]
             if isinstance(section, Mapping) and isinstance(section.get("ros__parameters"), Mapping):
-                return dict(section["ros__parameters"])
+                return _flatten(section["ros__parameters"])
     raise CellError(f"{where}: {path} has no section '{name}: ros__parameters: ...'")
 
 
@@ -165,7 +178,8 @@ def load_cell(path: Path, known_executables: frozenset[str] | None = None) -> Ce
                         node_where,
                     )
                 )
-            for key, value in _mapping(spec.get("parameters"), f"{node_where}.parameters").items():
+            overrides = _flatten(_mapping(spec.get("parameters"), f"{node_where}.parameters"))
+            for key, value in overrides.items():
                 if not isinstance(value, _SCALAR) and not (
                     isinstance(value, list) and all(isinstance(v, _SCALAR) for v in value)
                 ):

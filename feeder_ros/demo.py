@@ -1,93 +1,278 @@
-"""``make demo``: bring up feeder nodes as separate processes and show them talking over DDS.
+"""``make demo``: the simulated feeder cell end to end, on embedded defaults.
 
-This is the graph smoke of the package foundation: it starts the node executables in a
-namespace, watches their topics from a probe node and prints what it received. Later stages
-of the suite replace it with the full simulated cell (simulator, estimator, drive interface and
-speed monitor under an example cell controller).
+1. ``feeder cell`` brings up the cell of ``config/cell.yaml``: the platform simulator (damped
+   preset, a bowl feeding a part every 2 s), the vehicle estimator, the drive interface and the
+   speed monitor, each a process, in namespace ``/demo_cell/feeder_1``.
+2. The example cell controller (``examples/cell_controller.py``) drives it through the public
+   interface only: start, target speed, change of speed, a watchdog trip (its heartbeat stops) and
+   the recovery, stop.
+3. A probe records what the cell published; the demo prints a summary (speeds achieved against
+   the targets, by the estimator, by the part-present sensors and in truth; feed rate; diagnostics
+   seen) and writes plots and the data to ``--output``.
 """
 
 from __future__ import annotations
 
 import argparse
 import json
+import math
 import os
-import shutil
 import signal
 import subprocess
 import sys
+import threading
 import time
+from collections.abc import Callable
+from dataclasses import dataclass, field
 from pathlib import Path
+from typing import Any
 
+import numpy as np
 import rclpy
+from diagnostic_msgs.msg import DiagnosticArray
+from rclpy.context import Context
+from rclpy.executors import MultiThreadedExecutor
 from rclpy.qos import QoSProfile, ReliabilityPolicy
 
-from feeder_ros.msg import DriveCommand
+from feeder_ros.msg import DriveState, PartExit, PartStateArray, SpeedStatus, VehicleEstimate
+
+REPO = Path(__file__).resolve().parents[1]
+RELIABLE = QoSProfile(depth=1000, reliability=ReliabilityPolicy.RELIABLE)
+LEVELS = ("OK", "WARN", "ERROR", "STALE")
 
 
-def _executable(name: str) -> str:
-    path = Path(sys.executable).parent / name
-    found = str(path) if path.exists() else shutil.which(name)
-    if found is None:
-        raise SystemExit(f"executable {name!r} not found: run `make install` first")
-    return found
+def _seconds(stamp: Any) -> float:
+    return float(stamp.sec) + float(stamp.nanosec) * 1e-9
+
+
+@dataclass
+class Recording:
+    """What the probe saw, as rows stamped with the system clock (what ROS time is when the
+    simulator runs paced, so part stamps, controller steps and these rows share one time base)."""
+
+    start: float = field(default_factory=time.time)
+    estimate: list[tuple[float, float, float]] = field(default_factory=list)
+    status: list[tuple[float, float, float, float, float, int, int]] = field(default_factory=list)
+    drive: list[tuple[float, int, float, float, float]] = field(default_factory=list)
+    parts: list[tuple[float, dict[int, float]]] = field(default_factory=list)
+    exits: list[float] = field(default_factory=list)
+    diagnostics: dict[str, int] = field(default_factory=dict)
+    lock: threading.Lock = field(default_factory=threading.Lock)
+
+    def now(self) -> float:
+        return time.time()
+
+    def add(self, callback: Callable[[Any], None]) -> Callable[[Any], None]:
+        def locked(message: Any) -> None:
+            with self.lock:
+                callback(message)
+
+        return locked
+
+
+def _probe(namespace: str, recording: Recording) -> tuple[Context, Any, threading.Thread]:
+    context = Context()
+    rclpy.init(context=context)
+    node = rclpy.create_node("demo_probe", context=context)
+    r = recording
+
+    def on_estimate(m: VehicleEstimate) -> None:
+        r.estimate.append((r.now(), m.mean_speed_mps, m.mean_speed_confidence))
+
+    def on_status(m: SpeedStatus) -> None:
+        r.status.append(
+            (
+                r.now(),
+                m.target_speed_mps,
+                m.estimated_speed_mps,
+                m.transit_speed_mps,
+                m.feed_rate_ppm,
+                m.level,
+                m.alarms,
+            )
+        )
+
+    def on_drive(m: DriveState) -> None:
+        r.drive.append((r.now(), m.state, m.frequency_hz, m.amplitude_percent, m.amplitude_n))
+
+    def on_parts(m: PartStateArray) -> None:
+        positions = {p.part_id: p.position_m for p in m.parts if p.on_track}
+        r.parts.append((_seconds(m.header.stamp), positions))
+
+    def on_exit(m: PartExit) -> None:
+        r.exits.append(r.now())
+
+    def on_diagnostics(m: DiagnosticArray) -> None:
+        for status in m.status:
+            level = status.level[0] if isinstance(status.level, bytes) else int(status.level)
+            r.diagnostics[status.name] = max(r.diagnostics.get(status.name, 0), level)
+
+    subscribe = node.create_subscription
+    subscribe(VehicleEstimate, f"{namespace}/estimate", r.add(on_estimate), RELIABLE)
+    subscribe(SpeedStatus, f"{namespace}/speed/status", r.add(on_status), RELIABLE)
+    subscribe(DriveState, f"{namespace}/drive/state", r.add(on_drive), RELIABLE)
+    subscribe(PartStateArray, f"{namespace}/parts/state", r.add(on_parts), RELIABLE)
+    subscribe(PartExit, f"{namespace}/parts/exit", r.add(on_exit), RELIABLE)
+    subscribe(DiagnosticArray, "/diagnostics", r.add(on_diagnostics), RELIABLE)
+    executor = MultiThreadedExecutor(num_threads=2, context=context)
+    executor.add_node(node)
+    thread = threading.Thread(target=executor.spin, daemon=True)
+    thread.start()
+    return context, executor, thread
+
+
+def true_speed(parts: list[tuple[float, dict[int, float]]], t0: float, t1: float) -> float:
+    """Mean speed of the parts on the track between sim times t0 and t1 (ground truth)."""
+    inside = [(t, p) for t, p in parts if t0 <= t <= t1]
+    if len(inside) < 2:
+        return math.nan
+    (ta, first), (tb, last) = inside[0], inside[-1]
+    common = set(first) & set(last)
+    if not common or tb <= ta:
+        return math.nan
+    return float(np.mean([(last[i] - first[i]) / (tb - ta) for i in common]))
+
+
+def summarise(recording: Recording, timeline: list[dict[str, Any]], out: Path) -> dict[str, Any]:
+    """Per target-speed phase: the target, what the estimator, sensors and truth said at its end."""
+    phases = []
+    for entry in timeline:
+        if entry["step"] != "speed status":
+            continue
+        truth = true_speed(recording.parts, entry["wall_s"] - 4.0, entry["wall_s"])
+        phases.append(
+            {
+                "at_s": round(entry["wall_s"] - recording.start, 1),
+                "target_mm_s": entry.get("target_mm_s"),
+                "estimated_mm_s": entry.get("estimated_mm_s"),
+                "transit_mm_s": entry.get("transit_mm_s"),
+                "true_mm_s": None if math.isnan(truth) else round(truth * 1e3, 2),
+                "feed_rate_ppm": entry.get("feed_rate_ppm"),
+                "monitor": f"{entry.get('level')} {entry.get('message')}",
+            }
+        )
+    watchdog = next((e for e in timeline if e["step"] == "watchdog"), {})
+    summary = {
+        "phases": phases,
+        "watchdog": watchdog,
+        "parts_fed": len(recording.exits),
+        "diagnostics": {
+            name: LEVELS[min(level, 3)] for name, level in recording.diagnostics.items()
+        },
+        "controller_steps": timeline,
+    }
+    (out / "summary.json").write_text(json.dumps(summary, indent=2) + "\n")
+    return summary
+
+
+def plot(recording: Recording, out: Path) -> list[Path]:
+    import matplotlib
+
+    matplotlib.use("Agg")
+    import matplotlib.pyplot as plt
+
+    paths = []
+    t0 = recording.start
+    fig, (top, bottom) = plt.subplots(2, 1, sharex=True, figsize=(10, 7))
+    if recording.status:
+        s = np.array(recording.status)
+        top.plot(s[:, 0] - t0, s[:, 1] * 1e3, "k--", label="target")
+        top.plot(s[:, 0] - t0, s[:, 2] * 1e3, label="estimator (sensorless)")
+        top.plot(s[:, 0] - t0, s[:, 3] * 1e3, ".", label="sensor transit (8.5 cm)")
+    if len(recording.parts) > 20:
+        t = np.array([row[0] for row in recording.parts])
+        truth = np.array(
+            [(t[k] - t0, true_speed(recording.parts, t[k] - 2.0, t[k])) for k in range(20, t.size)]
+        )
+        top.plot(truth[:, 0], truth[:, 1] * 1e3, alpha=0.6, label="truth (simulator)")
+    top.set_ylabel("part speed [mm/s]")
+    top.legend(loc="upper right")
+    top.grid(True)
+    if recording.drive:
+        d = np.array(recording.drive)
+        d[:, 0] -= t0
+        bottom.plot(d[:, 0], d[:, 2], label="frequency [Hz]")
+        bottom.plot(d[:, 0], d[:, 3], label="amplitude [%]")
+        faults = d[:, 1] >= 3
+        if faults.any():
+            bottom.fill_between(
+                d[:, 0], 0, 1, where=faults, transform=bottom.get_xaxis_transform(),
+                color="red", alpha=0.2, label="fault / e-stop",
+            )  # fmt: skip
+    bottom.set_xlabel("time [s]")
+    bottom.legend(loc="upper right")
+    bottom.grid(True)
+    fig.tight_layout()
+    path = out / "cell_speed_and_drive.png"
+    fig.savefig(path, dpi=110)
+    plt.close(fig)
+    paths.append(path)
+    return paths
 
 
 def main(argv: list[str] | None = None) -> int:
     parser = argparse.ArgumentParser(description=__doc__.splitlines()[0] if __doc__ else None)
     parser.add_argument("--output", type=Path, default=Path("demo-output"))
+    parser.add_argument("--cell", type=Path, default=REPO / "config" / "cell.yaml")
     parser.add_argument("--namespace", default="/demo_cell/feeder_1")
-    parser.add_argument("--seconds", type=float, default=3.0)
+    parser.add_argument("--hold", type=float, default=12.0, help="seconds at each target speed")
     args = parser.parse_args(argv)
     args.output.mkdir(parents=True, exist_ok=True)
     os.environ.setdefault("ROS_AUTOMATIC_DISCOVERY_RANGE", "LOCALHOST")
+    bin_dir = Path(sys.executable).parent
+    started = time.monotonic()
 
-    command = [
-        _executable("manual_drive"),
-        "--ros-args",
-        "-r", f"__ns:={args.namespace}",
-        "-p", "frequency_hz:=47.0",
-        "-p", "amplitude_n:=40.0",
-        "-p", "rate_hz:=20.0",
-    ]  # fmt: skip
-    print(f"starting: {' '.join(command)}")
-    process = subprocess.Popen(command)
-    received: list[DriveCommand] = []
+    recording = Recording()
+    context, executor, thread = _probe(args.namespace, recording)
+    cell = subprocess.Popen([str(bin_dir / "feeder"), "cell", "--config", str(args.cell)])
+    timeline_file = args.output / "controller_timeline.json"
     try:
-        with rclpy.init():
-            node = rclpy.create_node("demo_probe")
-            qos = QoSProfile(depth=50, reliability=ReliabilityPolicy.RELIABLE)
-            topic = f"{args.namespace}/drive/command"
-            node.create_subscription(DriveCommand, topic, received.append, qos)
-            deadline = time.monotonic() + args.seconds + 10.0
-            first: float | None = None
-            while time.monotonic() < deadline:
-                rclpy.spin_once(node, timeout_sec=0.1)
-                if received and first is None:
-                    first = time.monotonic()
-                if first is not None and time.monotonic() - first >= args.seconds:
-                    break
-            node.destroy_node()
+        controller = subprocess.run(
+            [
+                sys.executable, str(REPO / "examples" / "cell_controller.py"),
+                "--namespace", args.namespace, "--hold", str(args.hold),
+                "--timeline", str(timeline_file),
+            ],
+            timeout=600,
+        )  # fmt: skip
     finally:
-        process.send_signal(signal.SIGINT)
-        process.wait(timeout=10)
+        cell.send_signal(signal.SIGINT)
+        cell_code = cell.wait(timeout=30)
+        executor.shutdown()
+        thread.join(timeout=5)
+        rclpy.shutdown(context=context)
 
-    if not received:
-        print(f"FAILED: no drive command received on {args.namespace}/drive/command")
-        return 1
-    last = received[-1]
-    summary = {
-        "topic": f"{args.namespace}/drive/command",
-        "messages": len(received),
-        "frequency_hz": last.frequency_hz,
-        "amplitude_n": last.amplitude_n,
-        "publisher_exit_code": process.returncode,
-    }
-    (args.output / "summary.json").write_text(json.dumps(summary, indent=2) + "\n")
-    print(f"received {len(received)} DriveCommand messages on {summary['topic']}")
-    print(f"  last: {last.frequency_hz} Hz, {last.amplitude_n} N, enabled={last.enabled}")
-    print(f"  publisher stopped cleanly: exit {process.returncode}")
-    print(f"summary written to {args.output / 'summary.json'}")
-    return 0 if process.returncode == 0 else 1
+    timeline = json.loads(timeline_file.read_text()) if timeline_file.exists() else []
+    summary = summarise(recording, timeline, args.output)
+    plots = plot(recording, args.output)
+    print()
+    print("== feeder cell demo: summary ==")
+    print(f"{'phase end':>9} {'target':>8} {'estimate':>9} {'sensors':>8} {'truth':>8} {'feed':>6}")
+    print(
+        f"{'[s]':>9} {'[mm/s]':>8} {'[mm/s]':>9} {'[mm/s]':>8} {'[mm/s]':>8} {'[ppm]':>6}  monitor"
+    )
+    for phase in summary["phases"]:
+        values = [
+            phase[k]
+            for k in ("target_mm_s", "estimated_mm_s", "transit_mm_s", "true_mm_s", "feed_rate_ppm")
+        ]
+        text = [f"{v:8.2f}" if isinstance(v, int | float) else f"{'-':>8}" for v in values]
+        print(f"{phase['at_s']:9.1f} {text[0]} {text[1]:>9} {text[2]} {text[3]} {text[4]:>6}  "
+              f"{phase['monitor']}")  # fmt: skip
+    watchdog = summary["watchdog"]
+    print(
+        f"watchdog: tripped={watchdog.get('tripped')} "
+        f"state={watchdog.get('state')} reason={watchdog.get('reason')!r}"
+    )
+    print(f"parts fed: {summary['parts_fed']}")
+    print("diagnostics seen (worst level per status):")
+    for name, level in sorted(summary["diagnostics"].items()):
+        print(f"  {level:5} {name}")
+    print(f"plots: {', '.join(str(p) for p in plots)}; data: {args.output / 'summary.json'}")
+    print(f"demo took {time.monotonic() - started:.0f} s")
+    ok = controller.returncode == 0 and cell_code == 0 and bool(summary["phases"])
+    print("DEMO OK" if ok else "DEMO FAILED")
+    return 0 if ok else 1
 
 
 if __name__ == "__main__":

@@ -53,7 +53,10 @@ def test_the_shipped_cell_description_is_valid() -> None:
     assert {"platform_simulator", "vehicle_estimator", "speed_monitor"} <= executables
     simulator = next(n for n in cell.nodes if n.executable == "platform_simulator")
     assert simulator.parameters["damping_ns_per_m"] == 200.0  # the realistic section
-    assert simulator.parameters["feed_interval_s"] == 2.0  # the cell's own override
+    assert simulator.parameters["feed_interval_s"] == 1.5  # the cell's own override
+    drive = next(n for n in cell.nodes if n.executable == "drive_interface")
+    assert drive.parameters["plant.damping_ns_per_m"] == 200.0  # nested override, flattened
+    assert drive.parameters["plant.youngs_modulus_pa"] == 200e9  # from drive_interface.yaml
 
 
 def test_parameters_document_is_keyed_by_fully_qualified_name(tmp_path: Path) -> None:
@@ -101,11 +104,11 @@ def test_parameters_document_is_keyed_by_fully_qualified_name(tmp_path: Path) ->
                 "feeders": [
                     {
                         "namespace": "/a",
-                        "nodes": {"manual_drive": {"parameters": {"rate_hz": {"x": 1}}}},
+                        "nodes": {"manual_drive": {"parameters": {"rate_hz": [{"x": 1}]}}},
                     }
                 ]
             },
-            "parameters.rate_hz={'x': 1} is not a value",
+            "parameters.rate_hz=[{'x': 1}] is not a value",
         ),
         ({"use_sim_time": "yes", "feeders": []}, "use_sim_time='yes'"),
     ],

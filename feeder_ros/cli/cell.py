@@ -17,6 +17,7 @@ import sys
 import tempfile
 import time
 from pathlib import Path
+from typing import Any
 
 from feeder_ros.cell import CellDescription, CellError, NodeLaunch, load_cell, parameters_document
 from feeder_ros.cli.main import CommandError
@@ -126,7 +127,7 @@ def run_composed(cell: CellDescription, parameters_file: Path, duration: float |
     import importlib
 
     import rclpy
-    from rclpy.executors import ExternalShutdownException, MultiThreadedExecutor
+    from rclpy.executors import ExternalShutdownException
 
     from feeder_ros.nodes.catalog import NODE_MODULES
 
@@ -135,25 +136,37 @@ def run_composed(cell: CellDescription, parameters_file: Path, duration: float |
         executable: importlib.import_module(modules[executable]).NODE_CLASS
         for executable in {launch.executable for launch in cell.nodes}
     }
-    with rclpy.init():
-        executor = MultiThreadedExecutor(num_threads=max(2, len(cell.nodes)))
-        nodes = []
-        try:
-            for launch in cell.nodes:
-                print(f"[cell] composing {launch.fully_qualified_name}", flush=True)
-                node = classes[launch.executable](cli_args=launch.ros_arguments(parameters_file))
-                nodes.append(node)
-                executor.add_node(node)
-            deadline = None if duration is None else time.monotonic() + duration
-            while deadline is None or time.monotonic() < deadline:
-                executor.spin_once(timeout_sec=0.1)
-        except (KeyboardInterrupt, ExternalShutdownException):
-            print("[cell] stopping", flush=True)
-        finally:
-            for node in nodes:
-                executor.remove_node(node)
-                node.destroy_node()
+    try:
+        with rclpy.init():
+            _spin_composed(cell, classes, parameters_file, duration)
+    except (KeyboardInterrupt, ExternalShutdownException):
+        # rclpy's handler shuts the context down, then chains to Python's (KeyboardInterrupt),
+        # which can land anywhere in the shutdown: the cell is stopping either way
+        pass
+    print("[cell] stopped", flush=True)
     return 0
+
+
+def _spin_composed(
+    cell: CellDescription, classes: dict[str, Any], parameters_file: Path, duration: float | None
+) -> None:
+    from rclpy.executors import MultiThreadedExecutor
+
+    executor = MultiThreadedExecutor(num_threads=max(2, len(cell.nodes)))
+    nodes = []
+    try:
+        for launch in cell.nodes:
+            print(f"[cell] composing {launch.fully_qualified_name}", flush=True)
+            node = classes[launch.executable](cli_args=launch.ros_arguments(parameters_file))
+            nodes.append(node)
+            executor.add_node(node)
+        deadline = None if duration is None else time.monotonic() + duration
+        while deadline is None or time.monotonic() < deadline:
+            executor.spin_once(timeout_sec=0.1)
+    finally:
+        for node in nodes:
+            executor.remove_node(node)
+            node.destroy_node()
 
 
 def run(args: argparse.Namespace) -> int:

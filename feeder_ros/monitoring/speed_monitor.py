@@ -160,26 +160,36 @@ class SpeedMonitor:
             self._speed = mean_speed_mps
             self._speed_t = t
 
-    def on_sensor_edge(self, t: float, sensor: int, part: int | None, present: bool) -> None:
-        """A part-present sensor edge; ``part`` is the part id where the sensor knows it."""
+    def on_sensor_edge(
+        self,
+        t: float,
+        sensor: int,
+        part: int | None,
+        present: bool,
+        edge_t: float | None = None,
+    ) -> None:
+        """A part-present sensor edge seen at ``t``; ``part`` is the part id where the sensor
+        knows it; ``edge_t`` is when the edge happened by the sensor's own stamp (the transit
+        speed is timed with it, so delivery delays do not distort it), default ``t``."""
         self._advance(t)
         self._last_part_t = t
+        stamp = t if edge_t is None or not math.isfinite(edge_t) else edge_t
         first, second = self.config.transit_pair
         if present:
             self._covered_since[sensor] = t
             if sensor == first:
                 if part is None:
-                    self._entry_queue.append(t)
+                    self._entry_queue.append(stamp)
                 else:
-                    self._arrivals[(first, part)] = t
+                    self._arrivals[(first, part)] = stamp
             elif sensor == second:
                 start = (
                     self._arrivals.pop((first, part), math.nan)
                     if part is not None
                     else (self._entry_queue.popleft() if self._entry_queue else math.nan)
                 )
-                if math.isfinite(start) and t > start:
-                    self._transit = self.config.transit_distance_m / (t - start)
+                if math.isfinite(start) and stamp > start:
+                    self._transit = self.config.transit_distance_m / (stamp - start)
         else:
             self._covered_since.pop(sensor, None)
 

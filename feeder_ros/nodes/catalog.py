@@ -7,6 +7,7 @@ import importlib
 from feeder_ros.node_interfaces import NodeInterface
 
 NODE_MODULES: tuple[str, ...] = (
+    "feeder_ros.nodes.drive_interface",
     "feeder_ros.nodes.manual_drive",
     "feeder_ros.nodes.platform_simulator",
     "feeder_ros.nodes.vehicle_estimator",

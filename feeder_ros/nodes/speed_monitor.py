@@ -217,8 +217,12 @@ class SpeedMonitorNode(Node):
 
     def _on_edge(self, message: PartSensorEvent) -> None:
         part = None if message.part_id == PartSensorEvent.PART_ID_UNKNOWN else message.part_id
+        stamp = message.header.stamp
+        edge_t = stamp.sec + stamp.nanosec * 1e-9 if stamp.sec or stamp.nanosec else None
         with self._lock:
-            self._monitor.on_sensor_edge(self._now(), message.sensor_index, part, message.present)
+            self._monitor.on_sensor_edge(
+                self._now(), message.sensor_index, part, message.present, edge_t
+            )
 
     def _on_exit(self, message: PartExit) -> None:
         with self._lock:

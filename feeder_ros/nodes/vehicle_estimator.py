@@ -322,13 +322,15 @@ class VehicleEstimatorNode(Node):
             record = self._record
             silent_s = (self.get_clock().now() - self._last_input).nanoseconds * 1e-9
             received = self._received
-        if received == 0 or silent_s > self._values["input_timeout_s"]:
+        if silent_s > self._values["input_timeout_s"]:
             level = DiagnosticStatus.ERROR
             text = (
-                "no accelerometer samples yet"
-                if received == 0
-                else f"sensor timeout: no sample for {silent_s:.1f} s"
+                f"sensor timeout: no accelerometer sample for {silent_s:.1f} s"
+                if received
+                else f"no accelerometer sample in {silent_s:.1f} s since start"
             )
+        elif received == 0:
+            level, text = DiagnosticStatus.WARN, "waiting for the first accelerometer sample"
         elif record.status in _WARN_STATUSES:
             level, text = DiagnosticStatus.WARN, record.status_message or record.status.name
         else:

@@ -112,6 +112,13 @@ def test_transit_speed_by_part_id_and_first_in_first_out() -> None:
     assert anonymous.evaluate(5.3).transit_speed_mps == pytest.approx(0.085 / 4.25)
 
 
+def test_transit_is_timed_by_the_edge_stamps_not_by_delivery() -> None:
+    monitor = SpeedMonitor(MonitorConfig(transit_distance_m=0.085))
+    monitor.on_sensor_edge(20.0, 0, 1, True, edge_t=10.0)  # delivered late, in a burst
+    monitor.on_sensor_edge(20.1, 1, 1, True, edge_t=15.0)
+    assert monitor.evaluate(20.2).transit_speed_mps == pytest.approx(0.085 / 5.0)
+
+
 def test_feed_rate_over_the_window() -> None:
     monitor = SpeedMonitor(MonitorConfig(feed_window_s=60.0))
     monitor.on_drive(0.0, True, math.nan)

@@ -125,11 +125,15 @@ def test_bad_samples_are_reported_not_averaged_in() -> None:
                         return status
             return None
 
-        # before any sample: diagnostics say so (sensor missing is an error)
-        assert wait_until(lambda: own_status() is not None, 10.0)
-        first = own_status()
-        assert first is not None
-        assert first.level == DiagnosticStatus.ERROR
+        # no sample for longer than input_timeout_s (1 s) since start: a sensor error
+        def missing_sensor() -> bool:
+            status = own_status()
+            return status is not None and status.level == DiagnosticStatus.ERROR
+
+        assert wait_until(missing_sensor, 10.0)
+        missing = own_status()
+        assert missing is not None
+        assert "no accelerometer sample" in missing.message
 
         t0 = 1000.0
         command = DriveCommand(enabled=True, frequency_hz=25.0, amplitude_n=40.0)

@@ -1,0 +1,91 @@
+"""The small interface every drive backend implements, and the simulated-platform backend.
+
+The controller produces one :class:`DriveOutput` per tick; the node hands it to the backend,
+which must not block (a fieldbus backend does its I/O in its own thread) and reports its health
+as a :class:`BackendStatus` that the node turns into faults and diagnostics.
+"""
+
+from __future__ import annotations
+
+from collections.abc import Callable
+from dataclasses import dataclass, field
+from typing import Protocol
+
+__all__ = ["BackendStatus", "DriveBackend", "DriveOutput", "SimBackend"]
+
+
+@dataclass(frozen=True)
+class DriveOutput:
+    """What the feeder is told now. ``enabled=False`` means no drive force (frequency kept)."""
+
+    enabled: bool
+    frequency_hz: float
+    amplitude_percent: float
+    amplitude_n: float
+    ramp_time_s: float = 0.0  # time to move linearly from the previous output to this one
+    time_s: float = 0.0  # the time (node clock) this output is the value for: the command stamp
+
+
+@dataclass(frozen=True)
+class BackendStatus:
+    """Backend health: ``fault`` is empty when the drive can be driven."""
+
+    connected: bool
+    fault: str = ""
+    warning: str = ""
+    actual_frequency_hz: float | None = None
+    actual_amplitude_percent: float | None = None
+    details: dict[str, str] = field(default_factory=dict)
+
+
+class DriveBackend(Protocol):
+    name: str
+
+    def connect(self) -> None:
+        """Start talking to the drive (may return before the link is up; see status)."""
+        ...
+
+    def write(self, output: DriveOutput) -> None:
+        """Hand over the latest output; must not block."""
+        ...
+
+    def status(self) -> BackendStatus: ...
+
+    def disconnect(self) -> None:
+        """Drive off, then stop talking to the drive."""
+        ...
+
+
+class SimBackend:
+    """The platform simulator: every output is published as a freshly stamped DriveCommand by the
+    ``publish`` callable the node supplies (the simulator treats an old command as a stop)."""
+
+    name = "sim"
+
+    def __init__(self, publish: Callable[[DriveOutput], None]) -> None:
+        self._publish = publish
+        self._connected = False
+        self._last: DriveOutput | None = None
+
+    def connect(self) -> None:
+        self._connected = True
+
+    def write(self, output: DriveOutput) -> None:
+        if self._connected:
+            self._last = output
+            self._publish(output)
+
+    def status(self) -> BackendStatus:
+        details = {"transport": "drive/command (feeder_ros/DriveCommand)"}
+        if self._last is not None:
+            details["last command"] = (
+                f"enabled={self._last.enabled} {self._last.frequency_hz:.3f} Hz "
+                f"{self._last.amplitude_percent:.2f} %"
+            )
+        return BackendStatus(connected=self._connected, details=details)
+
+    def disconnect(self) -> None:
+        if self._connected and self._last is not None:
+            last = self._last
+            self._publish(DriveOutput(False, last.frequency_hz, 0.0, 0.0, time_s=last.time_s))
+        self._connected = False

@@ -1,0 +1,796 @@
+"""``drive_interface``: the managed node a pick-and-place cell controller talks to.
+
+Lifecycle: configure reads the limits, builds the speed model and connects the backend; activate
+permits output; deactivate ramps to zero (output off when there); cleanup and shutdown disconnect.
+Services answer accepted / clamped / refused with a reason. All decisions are made by
+:class:`feeder_ros.drive.controller.DriveController` (ROS-free, unit-tested); this module turns
+parameters, messages, service calls and lifecycle transitions into calls on it, on the node clock.
+
+Backends: ``sim`` publishes ``drive/command`` (freshly stamped, ``publish_rate_hz``, enabled=false
+when off) for the platform simulator; ``modbus_tcp`` talks to a real feeder controller
+(register map in ``config/drive_interface.yaml``).
+"""
+
+from __future__ import annotations
+
+import math
+from dataclasses import replace
+from pathlib import Path
+from typing import Any
+
+from diagnostic_msgs.msg import DiagnosticArray, DiagnosticStatus, KeyValue
+from rclpy.duration import Duration
+from rclpy.lifecycle import LifecycleNode, LifecycleState, TransitionCallbackReturn
+from rclpy.parameter import Parameter
+from rclpy.qos import QoSProfile, ReliabilityPolicy
+from rclpy.time import Time
+from std_msgs.msg import Header
+from std_srvs.srv import Trigger
+
+from feeder_ros.drive.backend import BackendStatus, DriveBackend, DriveOutput, SimBackend
+from feeder_ros.drive.controller import DriveController, DriveState
+from feeder_ros.drive.limits import DriveLimits, parse_bands
+from feeder_ros.drive.modbus import ModbusSettings, ModbusTcpBackend, RegisterMap
+from feeder_ros.drive.speed_model import SpeedModel, cached_speed_table, default_cache_dir
+from feeder_ros.msg import DriveCommand
+from feeder_ros.msg import DriveState as DriveStateMsg
+from feeder_ros.node_interfaces import NodeInterface, ServiceSpec, TopicSpec
+from feeder_ros.nodes.ros_parameters import declare_parameters, validator
+from feeder_ros.nodes.runner import run_node
+from feeder_ros.physics.parameters import PARAMETER_SPECS, FeederParameters, ParameterSpec
+from feeder_ros.srv import SetDrive, SetTargetSpeed
+
+_AT_CONFIGURE = " (read at configure)"
+_PLANT_PREFIX = "plant."
+_PLANT_EXCLUDED = {"drive_frequency_hz", "drive_amplitude_n"}  # the drive is what we choose
+
+LIMIT_PARAMETERS = (
+    ParameterSpec("min_frequency_hz", float, "Hz", "lowest drive frequency", 0.1, 10000.0),
+    ParameterSpec("max_frequency_hz", float, "Hz", "highest drive frequency", 0.1, 10000.0),
+    ParameterSpec(
+        "max_amplitude_percent",
+        float,
+        "%",
+        "highest drive amplitude",
+        0.0,
+        100.0,
+        exclusive_minimum=True,
+    ),
+    ParameterSpec(
+        "max_frequency_rate_hz_per_s",
+        float,
+        "Hz/s",
+        "soft start/stop: fastest frequency change while driving",
+        0.0,
+        100000.0,
+        exclusive_minimum=True,
+    ),
+    ParameterSpec(
+        "max_amplitude_rate_percent_per_s",
+        float,
+        "%/s",
+        "soft start/stop: fastest amplitude change",
+        0.0,
+        100000.0,
+        exclusive_minimum=True,
+    ),
+    ParameterSpec(
+        "forbidden_bands_hz",
+        str,
+        "Hz",
+        "frequency bands a set point may not lie in (ramps cross them), as "
+        "'low, high, low, high, ...'; empty: none",
+    ),
+    ParameterSpec(
+        "full_scale_force_n",
+        float,
+        "N",
+        "drive force at 100 % amplitude (force = amplitude/100 * full scale)",
+        0.0,
+        1.0e6,
+        exclusive_minimum=True,
+    ),
+    ParameterSpec(
+        "heartbeat_timeout_s",
+        float,
+        "s",
+        "without a heartbeat for this long the drive ramps to zero and faults; "
+        "0 disables the watchdog",
+        0.0,
+        3600.0,
+    ),
+)
+NODE_PARAMETERS = (
+    ParameterSpec(
+        "backend", str, "", "drive backend" + _AT_CONFIGURE, choices=("sim", "modbus_tcp")
+    ),
+    ParameterSpec(
+        "publish_rate_hz",
+        float,
+        "Hz",
+        "output, drive/command and drive/state rate" + _AT_CONFIGURE,
+        1.0,
+        1000.0,
+    ),
+    ParameterSpec(
+        "diagnostics_period_s", float, "s", "/diagnostics period (read at start)", 0.05, 60.0
+    ),
+    ParameterSpec(
+        "speed_model_enabled",
+        bool,
+        "",
+        "build the physics speed table (target-speed mode)" + _AT_CONFIGURE,
+    ),
+    ParameterSpec(
+        "speed_model_frequency_steps",
+        int,
+        "1",
+        "speed table: frequencies over the allowed range" + _AT_CONFIGURE,
+        1,
+        1000,
+    ),
+    ParameterSpec(
+        "speed_model_amplitude_steps",
+        int,
+        "1",
+        "speed table: amplitudes from 0 to max_amplitude_percent" + _AT_CONFIGURE,
+        2,
+        1000,
+    ),
+    ParameterSpec(
+        "speed_model_duration_s",
+        float,
+        "s",
+        "speed table: simulated time per point (one part from rest)" + _AT_CONFIGURE,
+        0.0,
+        600.0,
+        exclusive_minimum=True,
+    ),
+    ParameterSpec(
+        "speed_model_cache_dir",
+        str,
+        "",
+        "directory of cached speed tables (keyed by every input); empty: "
+        "$XDG_CACHE_HOME/feeder_ros/speed_tables",
+    ),
+    ParameterSpec(
+        "unreachable_speed",
+        str,
+        "",
+        "an unreachable target speed is refused (with the reachable range) or clamped "
+        "to the nearest reachable one",
+        choices=("refuse", "clamp"),
+    ),
+    ParameterSpec("modbus.host", str, "", "feeder controller address" + _AT_CONFIGURE),
+    ParameterSpec("modbus.port", int, "1", "Modbus TCP port" + _AT_CONFIGURE, 1, 65535),
+    ParameterSpec("modbus.device_id", int, "1", "Modbus unit/device id" + _AT_CONFIGURE, 0, 255),
+    ParameterSpec("modbus.timeout_s", float, "s", "request timeout" + _AT_CONFIGURE, 0.01, 60.0),
+    ParameterSpec(
+        "modbus.poll_period_s", float, "s", "write/read cycle" + _AT_CONFIGURE, 0.005, 10.0
+    ),
+    ParameterSpec(
+        "modbus.reconnect_min_s", float, "s", "first reconnect delay" + _AT_CONFIGURE, 0.01, 600.0
+    ),
+    ParameterSpec(
+        "modbus.command_timeout_s",
+        float,
+        "s",
+        "the I/O thread switches the drive off when the node has handed over no output for this "
+        "long (a hung node never leaves a stale command standing)" + _AT_CONFIGURE,
+        0.01,
+        60.0,
+    ),
+    ParameterSpec(
+        "modbus.reconnect_max_s",
+        float,
+        "s",
+        "reconnect delay cap (doubling back-off)" + _AT_CONFIGURE,
+        0.01,
+        600.0,
+    ),
+    *(
+        ParameterSpec(f"modbus.register.{name}", int, "1", f"{meaning} holding register", 0, 65535)
+        for name, meaning in (
+            ("command", "command word (bit 0 enable, bit 1 alarm reset)"),
+            ("frequency", "frequency set point"),
+            ("amplitude", "amplitude set point"),
+            ("ramp_time", "ramp time to the set point"),
+            ("heartbeat", "heartbeat counter (incremented each write)"),
+            ("status", "status word (running, alarm bits)"),
+            ("alarm_code", "controller alarm code"),
+            ("actual_frequency", "actual frequency"),
+            ("actual_amplitude", "actual amplitude"),
+        )
+    ),
+    ParameterSpec(
+        "modbus.scale.frequency_counts_per_hz",
+        float,
+        "1/Hz",
+        "frequency register counts per Hz",
+        0.0,
+        1.0e6,
+        exclusive_minimum=True,
+    ),
+    ParameterSpec(
+        "modbus.scale.amplitude_counts_per_percent",
+        float,
+        "1/%",
+        "amplitude register counts per %",
+        0.0,
+        1.0e6,
+        exclusive_minimum=True,
+    ),
+    ParameterSpec(
+        "modbus.scale.ramp_time_counts_per_s",
+        float,
+        "1/s",
+        "ramp-time register counts per s",
+        0.0,
+        1.0e6,
+        exclusive_minimum=True,
+    ),
+    ParameterSpec("modbus.status_running_bit", int, "1", "status word bit: running", 0, 15),
+    ParameterSpec("modbus.status_alarm_bit", int, "1", "status word bit: alarm", 0, 15),
+)
+PLANT_PARAMETERS = tuple(
+    replace(
+        spec,
+        name=_PLANT_PREFIX + spec.name,
+        description="speed model plant: " + spec.description + _AT_CONFIGURE,
+        read_only=False,
+    )
+    for spec in PARAMETER_SPECS.values()
+    if spec.name not in _PLANT_EXCLUDED
+)
+PARAMETERS: dict[str, ParameterSpec] = {
+    spec.name: spec for spec in (*LIMIT_PARAMETERS, *NODE_PARAMETERS, *PLANT_PARAMETERS)
+}
+_MAP = RegisterMap()
+_MODBUS = ModbusSettings()
+DEFAULTS: dict[str, Any] = {
+    "min_frequency_hz": 5.0,
+    "max_frequency_hz": 300.0,
+    "max_amplitude_percent": 100.0,
+    "max_frequency_rate_hz_per_s": 50.0,
+    "max_amplitude_rate_percent_per_s": 50.0,
+    "forbidden_bands_hz": "",
+    "full_scale_force_n": 100.0,
+    "heartbeat_timeout_s": 2.0,
+    "backend": "sim",
+    "publish_rate_hz": 50.0,
+    "diagnostics_period_s": 1.0,
+    "speed_model_enabled": True,
+    "speed_model_frequency_steps": 30,
+    "speed_model_amplitude_steps": 11,
+    "speed_model_duration_s": 2.0,
+    "speed_model_cache_dir": "",
+    "unreachable_speed": "refuse",
+    "modbus.host": _MODBUS.host,
+    "modbus.port": _MODBUS.port,
+    "modbus.device_id": _MODBUS.device_id,
+    "modbus.timeout_s": _MODBUS.timeout_s,
+    "modbus.poll_period_s": _MODBUS.poll_period_s,
+    "modbus.reconnect_min_s": _MODBUS.reconnect_min_s,
+    "modbus.reconnect_max_s": _MODBUS.reconnect_max_s,
+    "modbus.command_timeout_s": _MODBUS.command_timeout_s,
+    **{
+        f"modbus.register.{name}": getattr(_MAP, name)
+        for name in (
+            "command",
+            "frequency",
+            "amplitude",
+            "ramp_time",
+            "heartbeat",
+            "status",
+            "alarm_code",
+            "actual_frequency",
+            "actual_amplitude",
+        )
+    },
+    "modbus.scale.frequency_counts_per_hz": _MAP.frequency_counts_per_hz,
+    "modbus.scale.amplitude_counts_per_percent": _MAP.amplitude_counts_per_percent,
+    "modbus.scale.ramp_time_counts_per_s": _MAP.ramp_time_counts_per_s,
+    "modbus.status_running_bit": _MAP.status_running_bit,
+    "modbus.status_alarm_bit": _MAP.status_alarm_bit,
+    **{
+        _PLANT_PREFIX + name: value
+        for name, value in FeederParameters().as_dict().items()
+        if name not in _PLANT_EXCLUDED
+    },
+}
+
+RELIABLE = QoSProfile(depth=10, reliability=ReliabilityPolicy.RELIABLE)
+
+INTERFACE = NodeInterface(
+    executable="drive_interface",
+    node_name="drive_interface",
+    summary="managed (lifecycle) drive-command interface for the cell controller: limits, soft "
+    "ramps, heartbeat watchdog, e-stop, target-speed mode; sim or Modbus TCP backend",
+    publishes=(
+        TopicSpec(
+            "drive/state",
+            "feeder_ros/msg/DriveState",
+            "reliable, depth 10",
+            "state (idle/ramping/running/fault/e-stop), output, set point, fault reason; "
+            "at publish_rate_hz once configured",
+        ),
+        TopicSpec(
+            "drive/command",
+            "feeder_ros/msg/DriveCommand",
+            "reliable, depth 10",
+            "sim backend: the output, freshly stamped at publish_rate_hz (enabled=false when off)",
+        ),
+        TopicSpec(
+            "/diagnostics",
+            "diagnostic_msgs/msg/DiagnosticArray",
+            "reliable, depth 10",
+            "OK/WARN/ERROR with state, output, heartbeat age and backend link details",
+        ),
+    ),
+    subscribes=(
+        TopicSpec(
+            "heartbeat",
+            "std_msgs/msg/Header",
+            "reliable, depth 10",
+            "the cell controller's heartbeat; none for heartbeat_timeout_s: ramp to zero, fault",
+        ),
+    ),
+    services=(
+        ServiceSpec("start", "std_srvs/srv/Trigger", "ramp to the set point (needs heartbeat)"),
+        ServiceSpec("stop", "std_srvs/srv/Trigger", "ramp to zero"),
+        ServiceSpec(
+            "set_drive",
+            "feeder_ros/srv/SetDrive",
+            "set frequency, amplitude, ramp time: ACCEPTED / CLAMPED / REFUSED with reason",
+        ),
+        ServiceSpec(
+            "set_target_speed",
+            "feeder_ros/srv/SetTargetSpeed",
+            "part speed via the speed model; unreachable: REFUSED with the range (or CLAMPED)",
+        ),
+        ServiceSpec("reset_fault", "std_srvs/srv/Trigger", "clear a latched fault or e-stop"),
+        ServiceSpec(
+            "emergency_stop", "std_srvs/srv/Trigger", "zero output at once; latched until reset"
+        ),
+        ServiceSpec(
+            "~/change_state",
+            "lifecycle_msgs/srv/ChangeState",
+            "lifecycle transitions (and ~/get_state, ~/get_available_transitions)",
+        ),
+    ),
+    parameters=PARAMETERS,
+)
+
+
+def limits_from(values: dict[str, Any]) -> DriveLimits:
+    return DriveLimits(
+        min_frequency_hz=values["min_frequency_hz"],
+        max_frequency_hz=values["max_frequency_hz"],
+        max_amplitude_percent=values["max_amplitude_percent"],
+        max_frequency_rate_hz_per_s=values["max_frequency_rate_hz_per_s"],
+        max_amplitude_rate_percent_per_s=values["max_amplitude_rate_percent_per_s"],
+        forbidden_bands_hz=parse_bands(values["forbidden_bands_hz"]),
+        full_scale_force_n=values["full_scale_force_n"],
+    )
+
+
+def register_map_from(values: dict[str, Any]) -> RegisterMap:
+    registers = {
+        key.removeprefix("modbus.register."): value
+        for key, value in values.items()
+        if key.startswith("modbus.register.")
+    }
+    scales = {
+        key.removeprefix("modbus.scale."): value
+        for key, value in values.items()
+        if key.startswith("modbus.scale.")
+    }
+    return RegisterMap(
+        **registers,
+        **scales,
+        status_running_bit=values["modbus.status_running_bit"],
+        status_alarm_bit=values["modbus.status_alarm_bit"],
+    )
+
+
+def modbus_settings_from(values: dict[str, Any]) -> ModbusSettings:
+    return ModbusSettings(
+        host=values["modbus.host"],
+        port=values["modbus.port"],
+        device_id=values["modbus.device_id"],
+        timeout_s=values["modbus.timeout_s"],
+        poll_period_s=values["modbus.poll_period_s"],
+        reconnect_min_s=values["modbus.reconnect_min_s"],
+        reconnect_max_s=values["modbus.reconnect_max_s"],
+        command_timeout_s=values["modbus.command_timeout_s"],
+    )
+
+
+def plant_from(values: dict[str, Any]) -> FeederParameters:
+    return FeederParameters.from_mapping(
+        {
+            key.removeprefix(_PLANT_PREFIX): value
+            for key, value in values.items()
+            if key.startswith(_PLANT_PREFIX)
+        }
+    )
+
+
+def check_combination(values: dict[str, Any]) -> None:
+    """Every combination the node could be configured with; raises with the offending values."""
+    limits_from(values)
+    register_map_from(values)
+    plant_from(values)
+    if values["modbus.reconnect_min_s"] > values["modbus.reconnect_max_s"]:
+        raise ValueError(
+            f"modbus.reconnect_min_s={values['modbus.reconnect_min_s']:g} exceeds "
+            f"modbus.reconnect_max_s={values['modbus.reconnect_max_s']:g}"
+        )
+
+
+_STATE_NAMES = {state: state.name.lower() for state in DriveState}
+
+
+class DriveInterface(LifecycleNode):
+    def __init__(self, **kwargs: Any) -> None:
+        super().__init__(INTERFACE.node_name, **kwargs)
+        self._values = declare_parameters(self, PARAMETERS.values(), DEFAULTS)
+        check_combination(self._values)
+        self.add_on_set_parameters_callback(
+            validator(PARAMETERS, check_all=check_combination, current=lambda: self._values)
+        )
+        self.add_post_set_parameters_callback(self._apply_parameters)
+
+        self._controller: DriveController | None = None
+        self._backend: DriveBackend | None = None
+        self._backend_fault = ""
+        self._speed_source = "none"
+        self._command_pub: Any = None
+        self._loop_timers: list[Any] = []
+        self._last_output = DriveOutput(False, 0.0, 0.0, 0.0)
+        # plain publishers: they exist unconfigured, and keep publishing the ramp to zero after
+        # deactivate (lifecycle publishers would fall silent at once)
+        self._state_pub = self.create_publisher(DriveStateMsg, "drive/state", RELIABLE)
+        self._diagnostics_pub = self.create_publisher(DiagnosticArray, "/diagnostics", RELIABLE)
+        self.create_subscription(Header, "heartbeat", self._on_heartbeat, RELIABLE)
+        self.create_service(Trigger, "start", self._on_start)
+        self.create_service(Trigger, "stop", self._on_stop)
+        self.create_service(SetDrive, "set_drive", self._on_set_drive)
+        self.create_service(SetTargetSpeed, "set_target_speed", self._on_set_target_speed)
+        self.create_service(Trigger, "reset_fault", self._on_reset_fault)
+        self.create_service(Trigger, "emergency_stop", self._on_emergency_stop)
+        # diagnostics in every lifecycle state: an unconfigured drive is worth a WARN too
+        self.create_timer(self._values["diagnostics_period_s"], self._publish_diagnostics)
+
+    # -- time and parameters -------------------------------------------------------------------
+    def _now(self) -> float:
+        return float(self.get_clock().now().nanoseconds) * 1e-9
+
+    def _apply_parameters(self, parameters: list[Parameter[Any]]) -> None:
+        changed = {p.name for p in parameters if p.name in PARAMETERS}
+        for parameter in parameters:
+            if parameter.name in PARAMETERS:
+                self._values[parameter.name] = parameter.value
+        controller = self._controller
+        if controller is None:
+            return
+        if changed & {spec.name for spec in LIMIT_PARAMETERS} - {"heartbeat_timeout_s"}:
+            note = controller.update_limits(limits_from(self._values), self._now())
+            if note:
+                self.get_logger().warn(f"new limits moved the set point: {note}")
+        if "heartbeat_timeout_s" in changed:
+            controller.watchdog.timeout_s = float(self._values["heartbeat_timeout_s"])
+        if "unreachable_speed" in changed:
+            controller.clamp_unreachable_speed = self._values["unreachable_speed"] == "clamp"
+
+    # -- lifecycle -----------------------------------------------------------------------------
+    def on_configure(self, state: LifecycleState) -> TransitionCallbackReturn:
+        values = dict(self._values)
+        try:
+            limits = limits_from(values)
+            speed_model = self._build_speed_model(values, limits)
+        except (ValueError, RuntimeError) as error:
+            self.get_logger().error(f"configure failed: {error}")
+            return TransitionCallbackReturn.FAILURE
+        self._controller = DriveController(
+            limits,
+            heartbeat_timeout_s=values["heartbeat_timeout_s"],
+            speed_model=speed_model,
+            clamp_unreachable_speed=values["unreachable_speed"] == "clamp",
+        )
+        if values["backend"] == "sim":
+            self._command_pub = self.create_publisher(DriveCommand, "drive/command", RELIABLE)
+            self._backend = SimBackend(self._publish_command)
+        else:
+            self._backend = ModbusTcpBackend(
+                modbus_settings_from(values), register_map_from(values)
+            )
+        self._backend_fault = ""
+        self._backend.connect()
+        self._period_s = 1.0 / values["publish_rate_hz"]
+        self._loop_timers = [self.create_timer(self._period_s, self._tick)]
+        self.get_logger().info(
+            f"configured: backend {values['backend']}, {limits.min_frequency_hz:g}-"
+            f"{limits.max_frequency_hz:g} Hz, 0-{limits.max_amplitude_percent:g} %, "
+            f"speed model: {self._speed_source}"
+        )
+        return TransitionCallbackReturn.SUCCESS
+
+    def _build_speed_model(self, values: dict[str, Any], limits: DriveLimits) -> SpeedModel | None:
+        if not values["speed_model_enabled"]:
+            self._speed_source = "disabled"
+            return None
+        cache = values["speed_model_cache_dir"]
+        model, path, loaded = cached_speed_table(
+            plant_from(values),
+            limits,
+            Path(cache).expanduser() if cache else default_cache_dir(),
+            values["speed_model_frequency_steps"],
+            values["speed_model_amplitude_steps"],
+            values["speed_model_duration_s"],
+        )
+        low, high = model.reachable_range()
+        self._speed_source = (
+            f"{'loaded' if loaded else 'computed'} table {path.name}, {low:.4g}..{high:.4g} m/s"
+        )
+        return model
+
+    def on_activate(self, state: LifecycleState) -> TransitionCallbackReturn:
+        assert self._controller is not None
+        self._controller.activate(self._now())
+        return super().on_activate(state)
+
+    def on_deactivate(self, state: LifecycleState) -> TransitionCallbackReturn:
+        assert self._controller is not None
+        ramp_s = self._controller.deactivate(self._now())
+        self.get_logger().info(f"deactivated: ramping to zero in {ramp_s:.3f} s, then output off")
+        return super().on_deactivate(state)
+
+    def on_cleanup(self, state: LifecycleState) -> TransitionCallbackReturn:
+        self._teardown()
+        return TransitionCallbackReturn.SUCCESS
+
+    def on_shutdown(self, state: LifecycleState) -> TransitionCallbackReturn:
+        self._teardown()
+        return TransitionCallbackReturn.SUCCESS
+
+    def on_error(self, state: LifecycleState) -> TransitionCallbackReturn:
+        self._teardown()
+        return TransitionCallbackReturn.SUCCESS
+
+    def _teardown(self) -> None:
+        """Output off at once, backend disconnected, timers and drive/command gone."""
+        for timer in self._loop_timers:
+            self.destroy_timer(timer)
+        self._loop_timers = []
+        if self._controller is not None:
+            self._controller.emergency_stop(self._now(), "shutting down")
+            self._controller = None
+        if self._backend is not None:
+            self._backend.disconnect()
+            self._backend = None
+        if self._command_pub is not None:
+            # the last (disabled) command must reach the feeder before the writer goes away:
+            # destroying a reliable writer drops what readers have not acknowledged yet
+            if self.context.ok():
+                self._command_pub.wait_for_all_acked(Duration(seconds=1.0))
+            self.destroy_publisher(self._command_pub)
+            self._command_pub = None
+
+    def destroy_node(self) -> None:
+        try:
+            self._teardown()
+        except Exception as error:  # the context may already be shut down: log, go on
+            self.get_logger().warn(f"teardown on exit: {error}")
+        super().destroy_node()
+
+    # -- the loop ------------------------------------------------------------------------------
+    def _publish_command(self, output: DriveOutput) -> None:
+        if self._command_pub is None or not self.context.ok():
+            return  # shutting down after Ctrl-C: the simulator takes a silent drive as a stop
+        message = DriveCommand()
+        # stamped with the time the ramp value was computed for, so that stamps and values agree
+        message.header.stamp = Time(nanoseconds=round(output.time_s * 1e9)).to_msg()
+        message.enabled = output.enabled
+        message.frequency_hz = output.frequency_hz
+        message.amplitude_percent = output.amplitude_percent
+        message.amplitude_n = output.amplitude_n
+        message.ramp_time_s = output.ramp_time_s
+        self._command_pub.publish(message)
+
+    def _tick(self) -> None:
+        controller, backend = self._controller, self._backend
+        if controller is None or backend is None:
+            return
+        now = self._now()
+        status = backend.status()
+        if status.fault != self._backend_fault:
+            was_faulted = bool(self._backend_fault)
+            self._backend_fault = status.fault
+            controller.set_backend_fault(now, status.fault)
+            if status.fault and not was_faulted:
+                self.get_logger().error(f"backend fault: {status.fault}")
+            elif status.fault:  # the same fault, new details (e.g. the next retry delay)
+                self.get_logger().debug(f"backend fault: {status.fault}")
+            else:
+                self.get_logger().info("backend fault cleared (reset_fault to resume)")
+        output = controller.tick(now, self._period_s)
+        backend.write(output)
+        self._last_output = output
+        self._publish_state(controller, output)
+
+    def _publish_state(self, controller: DriveController, output: DriveOutput) -> None:
+        message = DriveStateMsg()
+        message.header.stamp = self.get_clock().now().to_msg()
+        message.state = int(controller.state)
+        message.frequency_hz = output.frequency_hz
+        message.amplitude_percent = output.amplitude_percent
+        message.amplitude_n = output.amplitude_n
+        message.target_frequency_hz = controller.set_point.frequency_hz
+        message.target_amplitude_percent = controller.set_point.amplitude_percent
+        message.speed_mode = controller.speed_mode
+        message.target_speed_mps = controller.target_speed_mps if controller.speed_mode else 0.0
+        message.backend = self._values["backend"]
+        message.fault_reason = controller.fault_reason
+        self._state_pub.publish(message)
+
+    def _publish_diagnostics(self) -> None:
+        controller, backend = self._controller, self._backend
+        if controller is None or backend is None:
+            self._publish_status(
+                DiagnosticStatus.WARN,
+                "unconfigured: output off",
+                "none",
+                {"lifecycle": "unconfigured or finalized"},
+            )
+            return
+        status: BackendStatus = backend.status()
+        now = self._now()
+        age = controller.watchdog.age_s(now)
+        level, summary = DiagnosticStatus.OK, _STATE_NAMES[controller.state]
+        if controller.state in (DriveState.FAULT, DriveState.ESTOP):
+            level, summary = DiagnosticStatus.ERROR, f"{summary}: {controller.fault_reason}"
+        elif status.fault:
+            level, summary = DiagnosticStatus.ERROR, f"backend: {status.fault}"
+        elif not status.connected:
+            level, summary = DiagnosticStatus.WARN, "backend not connected"
+        elif not controller.watchdog.alive(now):
+            level, summary = DiagnosticStatus.WARN, f"{summary}; no heartbeat"
+        out = self._last_output
+        values = {
+            "state": _STATE_NAMES[controller.state],
+            "active": str(controller.active),
+            "output enabled": str(out.enabled),
+            "frequency_hz": f"{out.frequency_hz:.3f}",
+            "amplitude_percent": f"{out.amplitude_percent:.3f}",
+            "amplitude_n": f"{out.amplitude_n:.3f}",
+            "target_frequency_hz": f"{controller.set_point.frequency_hz:.3f}",
+            "target_amplitude_percent": f"{controller.set_point.amplitude_percent:.3f}",
+            "heartbeat age s": "never" if math.isinf(age) else f"{age:.3f}",
+            "heartbeat timeout s": f"{controller.watchdog.timeout_s:g}",
+            "fault_reason": controller.fault_reason,
+            "speed model": self._speed_source,
+            "backend connected": str(status.connected),
+            "backend fault": status.fault,
+            **status.details,
+        }
+        if status.actual_frequency_hz is not None:
+            values["controller actual_frequency_hz"] = f"{status.actual_frequency_hz:.3f}"
+        if status.actual_amplitude_percent is not None:
+            values["controller actual_amplitude_percent"] = f"{status.actual_amplitude_percent:.3f}"
+        if not controller.active and level == DiagnosticStatus.OK:
+            level, summary = DiagnosticStatus.WARN, f"inactive: {summary}"
+        self._publish_status(level, summary, backend.name, values)
+
+    def _publish_status(
+        self, level: bytes, summary: str, hardware_id: str, values: dict[str, str]
+    ) -> None:
+        array = DiagnosticArray()
+        array.header.stamp = self.get_clock().now().to_msg()
+        array.status.append(
+            DiagnosticStatus(
+                level=level,
+                name=f"{self.get_fully_qualified_name()}: drive",
+                message=summary,
+                hardware_id=hardware_id,
+                values=[KeyValue(key=k, value=v) for k, v in values.items()],
+            )
+        )
+        self._diagnostics_pub.publish(array)
+
+    # -- inputs --------------------------------------------------------------------------------
+    def _on_heartbeat(self, message: Header) -> None:
+        if self._controller is not None:
+            self._controller.heartbeat(self._now())
+
+    def _not_configured(self) -> str:
+        return "drive interface not configured (lifecycle: configure, then activate)"
+
+    def _on_start(self, request: Trigger.Request, response: Trigger.Response) -> Any:
+        controller, backend = self._controller, self._backend
+        if controller is None or backend is None:
+            response.success, response.message = False, self._not_configured()
+            return response
+        status = backend.status()
+        if not status.connected:
+            response.success = False
+            response.message = f"backend not connected: {status.fault or status.warning}"
+            return response
+        answer = controller.start(self._now())
+        response.success, response.message = answer.success, answer.message
+        return response
+
+    def _on_stop(self, request: Trigger.Request, response: Trigger.Response) -> Any:
+        if self._controller is None:
+            response.success, response.message = True, "not configured: output is off"
+            return response
+        answer = self._controller.stop(self._now())
+        response.success, response.message = answer.success, answer.message
+        return response
+
+    def _on_emergency_stop(self, request: Trigger.Request, response: Trigger.Response) -> Any:
+        if self._controller is None:
+            response.success, response.message = True, "not configured: output is off"
+            return response
+        answer = self._controller.emergency_stop(self._now())
+        self._tick()  # the zero goes out now, not at the next tick
+        self.get_logger().warn(f"emergency stop: {answer.message}")
+        response.success, response.message = answer.success, answer.message
+        return response
+
+    def _on_reset_fault(self, request: Trigger.Request, response: Trigger.Response) -> Any:
+        controller, backend = self._controller, self._backend
+        if controller is None or backend is None:
+            response.success, response.message = False, self._not_configured()
+            return response
+        answer = controller.reset_fault(self._now())
+        message = answer.message
+        if not answer.success and controller.backend_fault:
+            acknowledge = getattr(backend, "acknowledge_fault", None)
+            if acknowledge is not None:
+                acknowledge()
+                message += "; alarm reset sent to the controller, call reset_fault again"
+        response.success, response.message = answer.success, message
+        return response
+
+    def _on_set_drive(self, request: SetDrive.Request, response: SetDrive.Response) -> Any:
+        if self._controller is None:
+            response.result, response.reason = SetDrive.Response.REFUSED, self._not_configured()
+            return response
+        answer = self._controller.set_drive(
+            self._now(), request.frequency_hz, request.amplitude_percent, request.ramp_time_s
+        )
+        response.result = int(answer.outcome)
+        response.reason = answer.reason
+        response.frequency_hz = answer.frequency_hz
+        response.amplitude_percent = answer.amplitude_percent
+        response.ramp_time_s = answer.ramp_time_s
+        return response
+
+    def _on_set_target_speed(
+        self, request: SetTargetSpeed.Request, response: SetTargetSpeed.Response
+    ) -> Any:
+        if self._controller is None:
+            response.result = SetTargetSpeed.Response.REFUSED
+            response.reason = self._not_configured()
+            return response
+        answer = self._controller.set_target_speed(
+            self._now(), request.speed_mps, request.ramp_time_s
+        )
+        response.result = int(answer.outcome)
+        response.reason = answer.reason
+        response.frequency_hz = answer.frequency_hz
+        response.amplitude_percent = answer.amplitude_percent
+        response.predicted_speed_mps = answer.predicted_speed_mps
+        return response
+
+
+NODE_CLASS = DriveInterface
+
+
+def main(args: list[str] | None = None) -> int:
+    return run_node(DriveInterface, args)
+
+
+if __name__ == "__main__":
+    raise SystemExit(main())

@@ -1,0 +1,212 @@
+"""The drive interface's state machine, driven with explicit times (no ROS, no clock)."""
+
+from __future__ import annotations
+
+import pytest
+
+from feeder_ros.drive.controller import DriveController, DriveState
+from feeder_ros.drive.limits import DriveLimits, Outcome
+from feeder_ros.drive.speed_model import TableSpeedModel
+
+LIMITS = DriveLimits(max_frequency_rate_hz_per_s=10.0, max_amplitude_rate_percent_per_s=25.0)
+
+
+def running_controller(now: float = 0.0, timeout: float = 2.0) -> DriveController:
+    controller = DriveController(LIMITS, heartbeat_timeout_s=timeout)
+    controller.activate(now)
+    controller.heartbeat(now)
+    answer = controller.set_drive(now, 30.0, 50.0, 0.0)
+    assert answer.outcome is Outcome.ACCEPTED, answer
+    assert controller.start(now).success
+    return controller
+
+
+def test_start_ramps_up_then_runs_at_the_set_point() -> None:
+    c = running_controller()
+    out = c.tick(0.0, 0.02)
+    assert c.state is DriveState.RAMPING
+    assert not out.enabled
+    out = c.tick(1.0, 0.02)
+    assert c.state is DriveState.RAMPING
+    assert out.enabled
+    assert out.amplitude_percent == pytest.approx(25.0)
+    assert out.amplitude_n == pytest.approx(25.0)
+    assert out.ramp_time_s == 0.02  # the receiver interpolates between ticks
+    c.heartbeat(1.5)
+    out = c.tick(2.5, 0.02)
+    assert c.state is DriveState.RUNNING
+    assert (out.frequency_hz, out.amplitude_percent, out.ramp_time_s) == (30.0, 50.0, 0.0)
+
+
+def test_set_drive_while_stopped_stores_and_reports_the_ramp_it_will_use() -> None:
+    c = DriveController(LIMITS)
+    c.activate(0.0)
+    answer = c.set_drive(0.0, 30.0, 50.0, 0.5)
+    assert answer.outcome is Outcome.ACCEPTED
+    assert answer.ramp_time_s == pytest.approx(2.0)
+    assert "set point stored; start to drive" in answer.reason
+    assert "lengthened from 0.5 s to 2.000 s" in answer.reason
+    assert not c.tick(1.0).enabled
+    assert c.state is DriveState.IDLE
+
+
+def test_clamped_set_drive_drives_the_clamped_values() -> None:
+    c = running_controller()
+    c.heartbeat(3.0)
+    answer = c.set_drive(3.0, 500.0, 50.0, 0.0)
+    assert answer.outcome is Outcome.CLAMPED
+    assert answer.frequency_hz == 300.0
+    assert "clamped to 300 Hz" in answer.reason
+    assert c.tick(3.0 + answer.ramp_time_s).frequency_hz == 300.0
+    assert answer.ramp_time_s == pytest.approx(27.0)  # 270 Hz at 10 Hz/s
+
+
+@pytest.mark.parametrize(
+    ("prepare", "fragment"),
+    [
+        ("inactive", "not active"),
+        ("no_heartbeat", "no heartbeat received"),
+        ("no_set_point", "set point amplitude is 0 %"),
+        ("estop", "emergency stop latched"),
+    ],
+)
+def test_start_refusals_say_why(prepare: str, fragment: str) -> None:
+    c = DriveController(LIMITS)
+    if prepare != "inactive":
+        c.activate(0.0)
+    if prepare != "no_heartbeat":
+        c.heartbeat(0.0)
+    if prepare != "no_set_point":
+        c.set_drive(0.0, 30.0, 40.0, 0.0)
+    if prepare == "estop":
+        c.emergency_stop(0.0)
+    answer = c.start(0.0)
+    assert not answer.success
+    assert fragment in answer.message
+    assert not c.tick(1.0).enabled
+
+
+def test_stop_ramps_down_then_idles() -> None:
+    c = running_controller()
+    c.heartbeat(3.0)
+    assert c.tick(3.0).amplitude_percent == 50.0
+    answer = c.stop(3.0)
+    assert answer.success
+    assert "ramping to zero in 2.000 s" in answer.message
+    assert c.tick(4.0).amplitude_percent == pytest.approx(25.0)
+    assert c.state is DriveState.RAMPING
+    out = c.tick(5.0)
+    assert not out.enabled
+    assert out.amplitude_n == 0.0
+    assert c.state is DriveState.IDLE
+    assert c.stop(6.0).message == "already stopped"
+
+
+def test_watchdog_trips_to_fault_and_ramps_down_when_heartbeats_stop() -> None:
+    c = running_controller(timeout=2.0)
+    c.heartbeat(3.0)
+    assert c.tick(4.9).amplitude_percent == 50.0
+    assert c.state is DriveState.RUNNING
+    out = c.tick(5.05)  # last beat at 3.0 s, timeout 2 s
+    assert c.state is DriveState.FAULT
+    assert "heartbeat lost" in c.fault_reason
+    assert "timeout 2 s" in c.fault_reason
+    assert out.amplitude_percent == pytest.approx(50.0)  # ramps, does not step
+    assert c.tick(6.05).amplitude_percent == pytest.approx(25.0)
+    assert not c.tick(7.1).enabled
+    assert c.state is DriveState.FAULT
+    c.heartbeat(8.0)
+    refused = c.start(8.0)
+    assert not refused.success
+    assert "fault latched (heartbeat lost" in refused.message
+    assert c.reset_fault(8.0).success
+    assert c.start(8.0).success
+    assert c.tick(9.0).enabled
+
+
+def test_emergency_stop_zeroes_at_once_and_latches_until_reset() -> None:
+    c = running_controller()
+    c.heartbeat(3.0)
+    assert c.tick(3.0).amplitude_percent == 50.0
+    assert c.emergency_stop(3.0).success
+    out = c.tick(3.0)
+    assert not out.enabled
+    assert out.amplitude_percent == 0.0
+    assert c.state is DriveState.ESTOP
+    assert c.fault_reason == "emergency stop requested"
+    assert c.set_drive(3.1, 30.0, 20.0, 0.0).outcome is Outcome.REFUSED
+    assert not c.start(3.1).success
+    c.fault(3.2, "something else")  # a fault does not replace a latched e-stop
+    assert c.tick(3.2)
+    assert c.state is DriveState.ESTOP
+    answer = c.reset_fault(3.3)
+    assert answer.success
+    assert "emergency stop requested" in answer.message
+    assert c.tick(3.3)
+    assert c.state is DriveState.IDLE
+    assert c.reset_fault(3.4).message == "no fault to reset"
+
+
+def test_backend_fault_zeroes_and_blocks_reset_until_it_clears() -> None:
+    c = running_controller()
+    c.heartbeat(3.0)
+    c.tick(3.0)
+    c.set_backend_fault(3.0, "controller alarm (code 7)")
+    assert not c.tick(3.0).enabled
+    assert c.state is DriveState.FAULT
+    assert c.fault_reason == "backend: controller alarm (code 7)"
+    answer = c.reset_fault(3.5)
+    assert not answer.success
+    assert "backend still faulted" in answer.message
+    c.set_backend_fault(4.0, "")
+    assert c.reset_fault(4.0).success
+
+
+def test_deactivate_ramps_to_zero_and_refuses_new_commands() -> None:
+    c = running_controller()
+    c.heartbeat(3.0)
+    c.tick(3.0)
+    assert c.deactivate(3.0) == pytest.approx(2.0)
+    assert c.tick(4.0).amplitude_percent == pytest.approx(25.0)
+    assert not c.tick(5.0).enabled
+    assert c.state is DriveState.IDLE
+    assert "not active" in c.set_drive(5.0, 30.0, 10.0, 0.0).reason
+
+
+def test_limit_change_clamps_the_running_set_point() -> None:
+    c = running_controller()
+    c.heartbeat(3.0)
+    c.tick(3.0)
+    note = c.update_limits(
+        DriveLimits(max_amplitude_percent=30.0, max_amplitude_rate_percent_per_s=10.0), 3.0
+    )
+    assert "clamped to 30 %" in note
+    assert c.tick(4.0).amplitude_percent == pytest.approx(40.0)  # down at the new 10 %/s
+    assert c.tick(5.0).amplitude_percent == pytest.approx(30.0)
+
+
+def test_target_speed_uses_the_model_and_refuses_or_clamps_the_unreachable() -> None:
+    table = TableSpeedModel(
+        [20.0, 30.0], [0.0, 50.0, 100.0], [[0.0, 0.01, 0.02], [0.0, 0.02, 0.05]]
+    )
+    c = DriveController(LIMITS, speed_model=table)
+    c.activate(0.0)
+    answer = c.set_target_speed(0.0, 0.02, 0.0)
+    assert answer.outcome is Outcome.ACCEPTED
+    # the best-predicted bracket: 10..20 mm/s at 20 Hz rather than 0..20 at 30 Hz
+    assert (answer.frequency_hz, answer.amplitude_percent) == (20.0, 100.0)
+    assert answer.predicted_speed_mps == pytest.approx(0.02)
+    assert c.speed_mode
+    refused = c.set_target_speed(0.0, 0.08, 0.0)
+    assert refused.outcome is Outcome.REFUSED
+    assert "reachable 0 .. 0.05 m/s" in refused.reason
+    c.clamp_unreachable_speed = True
+    clamped = c.set_target_speed(0.0, 0.08, 0.0)
+    assert clamped.outcome is Outcome.CLAMPED
+    assert clamped.predicted_speed_mps == pytest.approx(0.05)
+    assert (clamped.frequency_hz, clamped.amplitude_percent) == (30.0, 100.0)
+    c.set_drive(0.0, 30.0, 10.0, 0.0)
+    assert not c.speed_mode
+    no_model = DriveController(LIMITS)
+    no_model.activate(0.0)
+    assert "no speed model" in no_model.set_target_speed(0.0, 0.01, 0.0).reason

@@ -1,0 +1,102 @@
+"""Speed model: the table inverse (least amplitude), reachability, the physics-backed cache."""
+
+from __future__ import annotations
+
+from pathlib import Path
+
+import numpy as np
+import pytest
+
+from feeder_ros.drive.limits import DriveLimits
+from feeder_ros.drive.speed_model import (
+    TableSpeedModel,
+    cached_speed_table,
+    compute_speed_table,
+)
+from feeder_ros.physics.parameters import FeederParameters
+from feeder_ros.physics.simulation import simulate_many
+
+
+def test_choose_inverts_the_table_where_it_predicts_best() -> None:
+    model = TableSpeedModel(
+        [20.0, 30.0, 40.0],
+        [0.0, 50.0, 100.0],
+        [[0.0, 0.010, 0.020], [0.0, 0.030, 0.040], [0.0, -0.01, 0.060]],
+    )
+    assert model.reachable_range() == (-0.01, 0.06)
+    choice = model.choose(0.015)
+    assert choice is not None
+    # 75 % at 20 Hz (bracket 10..20 mm/s) beats 25 % at 30 Hz (bracket 0..30 mm/s): the
+    # interpolation there can be off by at most 10 mm/s instead of 30
+    assert choice.frequency_hz == 20.0
+    assert choice.amplitude_percent == pytest.approx(75.0)
+    assert model.predict(choice.frequency_hz, choice.amplitude_percent) == pytest.approx(0.015)
+    fast = model.choose(0.05)
+    assert fast is not None
+    assert (fast.frequency_hz, fast.amplitude_percent) == (40.0, pytest.approx(50.0 + 50.0 * 6 / 7))
+    assert model.choose(0.07) is None
+    assert model.nearest(0.07).predicted_speed_mps == pytest.approx(0.06)
+    zero = model.choose(0.0)
+    assert zero is not None
+    assert zero.amplitude_percent == 0.0
+
+
+def test_choose_avoids_the_steep_slip_threshold() -> None:
+    # 10 Hz: nothing moves until 20 %, then the speed shoots up (the slip threshold);
+    # 20 Hz: the speed grows evenly with amplitude. The even row is the robust choice.
+    model = TableSpeedModel(
+        [10.0, 20.0],
+        [0.0, 10.0, 20.0, 30.0, 40.0],
+        [[0.0, 0.0, 0.0, 0.030, 0.032], [0.0, 0.004, 0.008, 0.012, 0.016]],
+    )
+    choice = model.choose(0.010)
+    assert choice is not None
+    assert (choice.frequency_hz, choice.amplitude_percent) == (20.0, pytest.approx(25.0))
+
+
+def test_table_shape_and_grid_are_validated() -> None:
+    with pytest.raises(ValueError, match="shape"):
+        TableSpeedModel([20.0], [0.0, 100.0], [[0.0, 0.1, 0.2]])
+    with pytest.raises(ValueError, match="increasing"):
+        TableSpeedModel([20.0], [50.0, 0.0], [[0.0, 0.1]])
+
+
+def test_physics_table_matches_simulate_many_and_respects_forbidden_bands() -> None:
+    plant = FeederParameters()
+    limits = DriveLimits(
+        min_frequency_hz=10.0, max_frequency_hz=60.0, forbidden_bands_hz=((26.0, 34.0),)
+    )
+    model = compute_speed_table(
+        plant, limits, frequency_steps=11, amplitude_steps=3, duration_s=1.0
+    )
+    assert not np.any((model.frequencies_hz > 26.0) & (model.frequencies_hz < 34.0))
+    assert model.frequencies_hz.min() == 10.0
+    assert model.frequencies_hz.max() == 60.0
+    np.testing.assert_array_equal(model.amplitudes_percent, [0.0, 50.0, 100.0])
+    np.testing.assert_array_equal(model.speeds_mps[:, 0], 0.0)  # no drive, no motion
+    # one entry recomputed directly: 50 % of 100 N full scale = 50 N
+    row = int(np.argmin(np.abs(model.frequencies_hz - 20.0)))
+    point = plant.with_changes(
+        drive_frequency_hz=float(model.frequencies_hz[row]), drive_amplitude_n=50.0
+    )
+    direct = simulate_many([point], 1.0).mean_part_speed_mps[0]
+    assert model.speeds_mps[row, 1] == pytest.approx(direct, rel=1e-12, abs=1e-15)
+
+
+def test_cache_is_keyed_by_the_inputs(tmp_path: Path) -> None:
+    plant = FeederParameters()
+    limits = DriveLimits(min_frequency_hz=10.0, max_frequency_hz=60.0)
+    first, path, loaded = cached_speed_table(plant, limits, tmp_path, 5, 3, 0.5)
+    assert not loaded
+    assert path.is_file()
+    again, path_again, loaded_again = cached_speed_table(plant, limits, tmp_path, 5, 3, 0.5)
+    assert loaded_again
+    assert path_again == path
+    np.testing.assert_array_equal(again.speeds_mps, first.speeds_mps)
+    heavier = plant.with_changes(part_mass_kg=0.1)
+    _, other_path, other_loaded = cached_speed_table(heavier, limits, tmp_path, 5, 3, 0.5)
+    assert other_path != path
+    assert not other_loaded
+    path.write_bytes(b"damaged")
+    _, _, loaded_damaged = cached_speed_table(plant, limits, tmp_path, 5, 3, 0.5)
+    assert not loaded_damaged  # recomputed, not crashed

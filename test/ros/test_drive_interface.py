@@ -1,0 +1,617 @@
+"""The drive interface as a real process over DDS: lifecycle, services and their refusals, ramps on
+the wire, heartbeat watchdog, e-stop latching, target-speed mode against the platform simulator,
+and the Modbus TCP backend against an emulated feeder controller on loopback."""
+
+from __future__ import annotations
+
+import itertools
+import math
+import sys
+import threading
+import time
+from collections.abc import Callable, Iterator, Sequence
+from contextlib import contextmanager
+from pathlib import Path
+from typing import Any
+
+import yaml
+from diagnostic_msgs.msg import DiagnosticArray, DiagnosticStatus
+from lifecycle_msgs.msg import Transition
+from lifecycle_msgs.srv import ChangeState, GetState
+from rcl_interfaces.msg import Parameter as ParameterMsg
+from rcl_interfaces.msg import ParameterType, ParameterValue
+from rcl_interfaces.srv import GetParameters, SetParameters
+from rclpy.node import Node
+from rclpy.qos import QoSProfile, ReliabilityPolicy
+from rclpy.time import Time
+from ros_test_tools import call, probe_node, running, wait_until
+from std_msgs.msg import Header
+from std_srvs.srv import Trigger
+
+from feeder_ros.drive.modbus import COMMAND_ENABLE, RegisterMap
+from feeder_ros.drive.modbus_emulator import ControllerEmulator, free_port
+from feeder_ros.msg import CarrierState, DriveCommand, DriveState
+from feeder_ros.srv import SetDrive, SetTargetSpeed
+
+BIN = Path(sys.executable).parent
+DRIVE = str(BIN / "drive_interface")
+SIMULATOR = str(BIN / "platform_simulator")
+RELIABLE = QoSProfile(depth=1000, reliability=ReliabilityPolicy.RELIABLE)
+NODE = "drive_interface"
+
+
+def stamp_s(header: Header) -> float:
+    return Time.from_msg(header.stamp).nanoseconds * 1e-9
+
+
+class Cell:
+    """A probe acting as the cell controller for the drive interface in ``namespace``."""
+
+    def __init__(self, probe: Node, namespace: str) -> None:
+        self.probe = probe
+        self.ns = namespace
+        self.commands: list[DriveCommand] = []
+        self.states: list[DriveState] = []
+        self.diagnostics: list[DiagnosticArray] = []
+        self._lock = threading.Lock()
+        probe.create_subscription(
+            DriveCommand, f"{namespace}/drive/command", self._command, RELIABLE
+        )
+        probe.create_subscription(DriveState, f"{namespace}/drive/state", self._state, RELIABLE)
+        probe.create_subscription(DiagnosticArray, "/diagnostics", self._diagnostic, RELIABLE)
+        self._heartbeat_pub = probe.create_publisher(Header, f"{namespace}/heartbeat", 10)
+        self.beating = False
+        self.last_beat_s = math.nan
+        probe.create_timer(0.1, self._beat)
+
+    def _command(self, message: DriveCommand) -> None:
+        with self._lock:
+            self.commands.append(message)
+
+    def _state(self, message: DriveState) -> None:
+        with self._lock:
+            self.states.append(message)
+
+    def _diagnostic(self, message: DiagnosticArray) -> None:
+        if any(s.name.startswith(f"{self.ns}/{NODE}") for s in message.status):
+            with self._lock:
+                self.diagnostics.append(message)
+
+    def _beat(self) -> None:
+        if self.beating:
+            header = Header()
+            header.stamp = self.probe.get_clock().now().to_msg()
+            self._heartbeat_pub.publish(header)
+            self.last_beat_s = stamp_s(header)
+
+    # -- helpers used by the tests --------------------------------------------------------------
+    def start_heartbeat(self) -> None:
+        """Beat at 10 Hz; returns once the node is subscribed and a few beats went out."""
+        assert wait_until(lambda: self._heartbeat_pub.get_subscription_count() > 0, 10.0)
+        self.beating = True
+        time.sleep(0.35)
+
+    def commands_since(self, t_s: float) -> list[DriveCommand]:
+        with self._lock:
+            return [c for c in self.commands if stamp_s(c.header) >= t_s]
+
+    def states_since(self, t_s: float) -> list[DriveState]:
+        with self._lock:
+            return [s for s in self.states if stamp_s(s.header) >= t_s]
+
+    def last_state(self) -> DriveState | None:
+        with self._lock:
+            return self.states[-1] if self.states else None
+
+    def wait_state(self, state: int, timeout_s: float = 15.0) -> DriveState:
+        def reached() -> bool:
+            last = self.last_state()
+            return last is not None and last.state == state
+
+        assert wait_until(reached, timeout_s), f"never reached state {state}: {self.last_state()}"
+        last = self.last_state()
+        assert last is not None
+        return last
+
+    def last_diagnostic(self) -> DiagnosticStatus | None:
+        with self._lock:
+            if not self.diagnostics:
+                return None
+            return self.diagnostics[-1].status[0]
+
+    def now_s(self) -> float:
+        return float(self.probe.get_clock().now().nanoseconds) * 1e-9
+
+    def transition(self, transition_id: int) -> bool:
+        answer = call(
+            self.probe,
+            ChangeState,
+            f"{self.ns}/{NODE}/change_state",
+            ChangeState.Request(transition=Transition(id=transition_id)),
+            timeout_s=60.0,  # configure may compute the speed table
+        )
+        return bool(answer.success)
+
+    def lifecycle_state(self) -> str:
+        answer = call(self.probe, GetState, f"{self.ns}/{NODE}/get_state", GetState.Request())
+        return str(answer.current_state.label)
+
+    def trigger(self, name: str) -> Trigger.Response:
+        return call(self.probe, Trigger, f"{self.ns}/{name}", Trigger.Request())
+
+    def set_drive(self, frequency: float, amplitude: float, ramp: float) -> SetDrive.Response:
+        request = SetDrive.Request(
+            frequency_hz=frequency, amplitude_percent=amplitude, ramp_time_s=ramp
+        )
+        return call(self.probe, SetDrive, f"{self.ns}/set_drive", request)
+
+    def set_speed(self, speed: float, ramp: float = 0.0) -> SetTargetSpeed.Response:
+        request = SetTargetSpeed.Request(speed_mps=speed, ramp_time_s=ramp)
+        return call(self.probe, SetTargetSpeed, f"{self.ns}/set_target_speed", request)
+
+    def bring_up(self) -> None:
+        assert self.transition(Transition.TRANSITION_CONFIGURE)
+        assert self.transition(Transition.TRANSITION_ACTIVATE)
+        assert self.lifecycle_state() == "active"
+
+
+@contextmanager
+def drive_node(namespace: str, *params: str, params_file: Path | None = None) -> Iterator[Cell]:
+    command = [DRIVE, "--ros-args", "-r", f"__ns:={namespace}"]
+    if params_file is not None:
+        command += ["--params-file", str(params_file)]
+    for param in params:
+        command += ["-p", param]
+    with running(command) as process, probe_node() as probe:
+        cell = Cell(probe, namespace)
+        visible = wait_until(
+            lambda: (NODE, namespace) in probe.get_node_names_and_namespaces(), 30.0
+        )
+        assert visible, process.poll()
+        yield cell
+
+
+def _amplitudes(commands: Sequence[DriveCommand]) -> list[float]:
+    return [c.amplitude_percent if c.enabled else 0.0 for c in commands]
+
+
+def _max_rate(commands: Sequence[DriveCommand], field: str) -> float:
+    """Largest |change| per second between consecutive commands on the wire (by their stamps)."""
+    rates = []
+    for a, b in itertools.pairwise(commands):
+        dt = stamp_s(b.header) - stamp_s(a.header)
+        assert dt > 0.0, "drive commands must carry fresh, increasing stamps"
+        va = getattr(a, field) if a.enabled else 0.0
+        vb = getattr(b, field) if b.enabled else 0.0
+        rates.append(abs(vb - va) / dt)
+    return max(rates)
+
+
+FAST = ("speed_model_enabled:=false", "max_amplitude_rate_percent_per_s:=20.0")
+CONFIG = Path(__file__).resolve().parents[2] / "config" / "drive_interface.yaml"
+
+
+def _flatten(tree: dict[str, Any], prefix: str = "") -> dict[str, Any]:
+    flat: dict[str, Any] = {}
+    for key, value in tree.items():
+        if isinstance(value, dict):
+            flat.update(_flatten(value, f"{prefix}{key}."))
+        else:
+            flat[prefix + key] = value
+    return flat
+
+
+def test_config_file_lists_every_parameter_at_its_default() -> None:
+    from feeder_ros.nodes.drive_interface import DEFAULTS, PARAMETERS
+
+    tree = yaml.safe_load(CONFIG.read_text(encoding="utf-8"))
+    values = _flatten(tree["/**/drive_interface"]["ros__parameters"])
+    assert set(values) == set(PARAMETERS)
+    for name, value in values.items():
+        assert PARAMETERS[name].check(value) == DEFAULTS[name], name
+
+
+def test_config_file_is_applied_in_any_namespace(tmp_path: Path) -> None:
+    text = CONFIG.read_text(encoding="utf-8")
+    edited = tmp_path / "drive_interface.yaml"
+    edited.write_text(
+        text.replace("max_frequency_hz: 300.0", "max_frequency_hz: 250.0")
+        .replace("port: 502", "port: 1502")
+        .replace("speed_model_enabled: true", "speed_model_enabled: false"),
+        encoding="utf-8",
+    )
+    ns = "/cell_b/feeder_2"
+    with drive_node(ns, params_file=edited) as cell:
+        request = GetParameters.Request(names=["max_frequency_hz", "modbus.port", "backend"])
+        answer = call(cell.probe, GetParameters, f"{ns}/{NODE}/get_parameters", request)
+        assert [answer.values[0].double_value, answer.values[1].integer_value] == [250.0, 1502]
+        assert answer.values[2].string_value == "sim"
+        cell.bring_up()
+        clamped = cell.set_drive(280.0, 10.0, 0.0)
+        assert clamped.result == SetDrive.Response.CLAMPED
+        assert clamped.frequency_hz == 250.0
+        # shutdown from active: output off, backend gone, the process still exits cleanly
+        cell.start_heartbeat()
+        assert cell.set_drive(30.0, 10.0, 0.0).result == SetDrive.Response.ACCEPTED
+        assert cell.trigger("start").success
+        assert wait_until(lambda: bool(cell.commands) and cell.commands[-1].enabled, 10.0)
+        assert cell.transition(Transition.TRANSITION_ACTIVE_SHUTDOWN)
+        assert cell.lifecycle_state() == "finalized"
+        assert wait_until(lambda: not cell.commands[-1].enabled, 5.0)
+        refused = cell.trigger("start")
+        assert not refused.success
+        assert "not configured" in refused.message
+
+
+def test_unconfigured_node_refuses_and_parameters_are_validated() -> None:
+    ns = "/drive_params"
+    with drive_node(ns, *FAST) as cell:
+        assert cell.lifecycle_state() == "unconfigured"
+        assert wait_until(lambda: cell.last_diagnostic() is not None, 10.0)
+        status = cell.last_diagnostic()
+        assert status.level == DiagnosticStatus.WARN
+        assert status.message == "unconfigured: output off"
+        answer = cell.set_drive(30.0, 40.0, 0.0)
+        assert answer.result == SetDrive.Response.REFUSED
+        assert "not configured" in answer.reason
+        assert not cell.trigger("start").success
+        assert cell.set_speed(0.01).result == SetTargetSpeed.Response.REFUSED
+
+        def set_parameter(name: str, value: ParameterValue) -> Any:
+            request = SetParameters.Request(parameters=[ParameterMsg(name=name, value=value)])
+            return call(cell.probe, SetParameters, f"{ns}/{NODE}/set_parameters", request)
+
+        def double(value: float) -> ParameterValue:
+            return ParameterValue(type=ParameterType.PARAMETER_DOUBLE, double_value=value)
+
+        refused = set_parameter("min_frequency_hz", double(400.0)).results[0]
+        assert not refused.successful
+        assert "must be below max_frequency_hz=300" in refused.reason
+        bands = ParameterValue(type=ParameterType.PARAMETER_STRING, string_value="40, 50, 60")
+        refused = set_parameter("forbidden_bands_hz", bands).results[0]
+        assert not refused.successful
+        assert "pairs" in refused.reason
+        assert set_parameter("max_frequency_hz", double(200.0)).results[0].successful
+
+
+def test_ramps_stop_estop_and_deactivate_on_the_wire() -> None:
+    ns = "/drive_sim"
+    with drive_node(ns, *FAST) as cell:
+        cell.bring_up()
+        assert wait_until(lambda: len(cell.commands) > 10, 10.0)
+        assert not any(c.enabled for c in cell.commands)  # configured, not started: off
+        assert cell.last_state().state == DriveState.STATE_IDLE
+
+        refused = cell.trigger("start")
+        assert not refused.success
+        assert "no heartbeat received" in refused.message
+        cell.start_heartbeat()
+        refused = cell.trigger("start")
+        assert not refused.success
+        assert "call set_drive" in refused.message
+        bad = cell.set_drive(math.nan, 40.0, 0.0)
+        assert bad.result == SetDrive.Response.REFUSED
+        assert "frequency_hz=nan is not finite" in bad.reason
+        clamped = cell.set_drive(450.0, 60.0, 0.0)
+        assert clamped.result == SetDrive.Response.CLAMPED
+        assert clamped.frequency_hz == 300.0
+        assert "clamped to 300 Hz" in clamped.reason
+        stored = cell.set_drive(30.0, 60.0, 0.0)
+        assert stored.result == SetDrive.Response.ACCEPTED
+        assert (stored.frequency_hz, stored.amplitude_percent) == (30.0, 60.0)
+        assert abs(stored.ramp_time_s - 3.0) < 1e-9  # 60 % at 20 %/s
+        assert "start to drive" in stored.reason
+
+        # soft start: 0 -> 60 % at 20 %/s, seen as freshly stamped commands stepping up
+        t_start = cell.now_s()
+        started = cell.trigger("start")
+        assert started.success, started.message
+        assert "in 3.000 s" in started.message
+        cell.wait_state(DriveState.STATE_RUNNING)
+        ramp = cell.commands_since(t_start)
+        amplitudes = _amplitudes(ramp)
+        assert max(amplitudes) == 60.0
+        rising = [a for a in amplitudes if 0.0 < a < 60.0]
+        assert len(rising) >= 30, "the ramp must step through intermediate amplitudes"
+        assert rising == sorted(rising)
+        assert _max_rate(ramp, "amplitude_percent") <= 20.0 * 1.05
+        first_on = next(c for c in ramp if c.enabled)
+        at_top = next(c for c in ramp if c.enabled and c.amplitude_percent == 60.0)
+        assert stamp_s(at_top.header) - stamp_s(first_on.header) > 2.8
+        assert all(c.frequency_hz == 30.0 for c in ramp if c.enabled)
+        assert all(abs(c.amplitude_n - c.amplitude_percent) < 1e-9 for c in ramp)  # 100 N FS
+        state = cell.last_state()
+        assert (state.frequency_hz, state.amplitude_percent) == (30.0, 60.0)
+        assert state.backend == "sim"
+
+        # stop: ramps down (not a step), then enabled=false
+        t_stop = cell.now_s()
+        stopped = cell.trigger("stop")
+        assert stopped.success
+        assert "ramping to zero in 3.000 s" in stopped.message
+        cell.wait_state(DriveState.STATE_IDLE)
+        down = cell.commands_since(t_stop)
+        falling = [a for a in _amplitudes(down) if 0.0 < a < 60.0]
+        assert len(falling) >= 30
+        assert falling == sorted(falling, reverse=True)
+        assert _max_rate(down, "amplitude_percent") <= 20.0 * 1.05
+        assert wait_until(lambda: not cell.commands[-1].enabled, 5.0)
+
+        # e-stop: immediate zero, latched until reset
+        assert cell.trigger("start").success
+        cell.wait_state(DriveState.STATE_RUNNING)
+        t_estop = cell.now_s()
+        answer = cell.trigger("emergency_stop")
+        assert answer.success
+        estop = cell.wait_state(DriveState.STATE_ESTOP)
+        assert estop.fault_reason == "emergency stop requested"
+        assert estop.amplitude_percent == 0.0
+        assert wait_until(lambda: len(cell.commands_since(t_estop)) > 20, 5.0)
+        assert not any(c.enabled for c in cell.commands_since(t_estop + 0.1))
+        refused = cell.trigger("start")
+        assert not refused.success
+        assert "emergency stop latched" in refused.message
+        assert cell.set_drive(30.0, 10.0, 0.0).result == SetDrive.Response.REFUSED
+        time.sleep(0.5)
+        assert cell.last_state().state == DriveState.STATE_ESTOP  # still latched
+        reset = cell.trigger("reset_fault")
+        assert reset.success
+        assert "emergency stop requested" in reset.message
+        cell.wait_state(DriveState.STATE_IDLE)
+
+        # deactivate: ramps to zero, then off; commands refused while inactive
+        assert cell.trigger("start").success
+        cell.wait_state(DriveState.STATE_RUNNING)
+        t_deactivate = cell.now_s()
+        assert cell.transition(Transition.TRANSITION_DEACTIVATE)
+        assert cell.lifecycle_state() == "inactive"
+        cell.wait_state(DriveState.STATE_IDLE)
+        down = cell.commands_since(t_deactivate)
+        assert len([a for a in _amplitudes(down) if 0.0 < a < 60.0]) >= 30
+        assert not cell.commands[-1].enabled
+        refused = cell.trigger("start")
+        assert not refused.success
+        assert "not active" in refused.message
+
+        # cleanup: the backend is gone; drive/command and drive/state fall silent
+        assert cell.transition(Transition.TRANSITION_CLEANUP)
+        assert cell.lifecycle_state() == "unconfigured"
+        time.sleep(0.5)
+        count = len(cell.commands)
+        time.sleep(1.0)
+        assert len(cell.commands) == count
+        assert cell.set_drive(30.0, 10.0, 0.0).result == SetDrive.Response.REFUSED
+
+
+def test_watchdog_trips_within_its_timeout_and_ramps_to_zero() -> None:
+    ns = "/drive_watchdog"
+    with drive_node(ns, *FAST, "heartbeat_timeout_s:=1.5") as cell:
+        cell.bring_up()
+        cell.start_heartbeat()
+        assert wait_until(lambda: not math.isnan(cell.last_beat_s), 5.0)
+        assert cell.set_drive(40.0, 50.0, 0.0).result == SetDrive.Response.ACCEPTED
+        assert cell.trigger("start").success
+        cell.wait_state(DriveState.STATE_RUNNING)
+        assert wait_until(lambda: cell.last_diagnostic() is not None, 5.0)
+        cell.beating = False
+        time.sleep(0.2)
+        last_beat = cell.last_beat_s
+        fault = cell.wait_state(DriveState.STATE_FAULT, timeout_s=10.0)
+        assert "heartbeat lost" in fault.fault_reason
+        assert "timeout 1.5 s" in fault.fault_reason
+        first_fault = next(
+            s for s in cell.states_since(last_beat) if s.state == DriveState.STATE_FAULT
+        )
+        tripped_after = stamp_s(first_fault.header) - last_beat
+        assert 1.5 <= tripped_after <= 1.5 + 1.0, tripped_after  # generous: 2-core CI
+        # ramped to zero at the rate limit (50 % at 20 %/s), then off; still FAULT (latched)
+        assert wait_until(lambda: not cell.commands[-1].enabled, 10.0)
+        down = cell.commands_since(stamp_s(first_fault.header))
+        assert len([a for a in _amplitudes(down) if 0.0 < a < 50.0]) >= 20
+        assert _max_rate(down, "amplitude_percent") <= 20.0 * 1.05
+        assert cell.last_state().state == DriveState.STATE_FAULT
+
+        def diagnostic_error() -> bool:
+            status = cell.last_diagnostic()
+            return status is not None and status.level == DiagnosticStatus.ERROR
+
+        assert wait_until(diagnostic_error, 5.0)
+        status = cell.last_diagnostic()
+        assert status is not None
+        assert "heartbeat lost" in status.message
+        values = {kv.key: kv.value for kv in status.values}
+        assert values["state"] == "fault"
+        assert values["heartbeat timeout s"] == "1.5"
+        refused = cell.trigger("start")
+        assert not refused.success
+        assert "fault latched" in refused.message
+        cell.start_heartbeat()
+        assert cell.trigger("reset_fault").success
+        assert cell.trigger("start").success
+        cell.wait_state(DriveState.STATE_RUNNING)
+
+
+def test_target_speed_mode_drives_the_platform_simulator(tmp_path: Path) -> None:
+    ns = "/drive_speed"
+    params = (
+        f"speed_model_cache_dir:={tmp_path}",
+        "speed_model_frequency_steps:=12",
+        "speed_model_amplitude_steps:=6",
+        "speed_model_duration_s:=1.0",
+        "min_frequency_hz:=10.0",
+        "max_frequency_hz:=60.0",
+        "max_amplitude_rate_percent_per_s:=100.0",
+        "max_frequency_rate_hz_per_s:=100.0",
+    )
+    with (
+        drive_node(ns, *params) as cell,
+        running(
+            [
+                SIMULATOR,
+                "--ros-args",
+                "-r",
+                f"__ns:={ns}",
+                "-p",
+                "imu_rate_hz:=100.0",
+                "-p",
+                "state_rate_hz:=100.0",
+            ]
+        ),
+    ):
+        carrier: list[CarrierState] = []
+        cell.probe.create_subscription(
+            CarrierState, f"{ns}/carrier/state", carrier.append, RELIABLE
+        )
+        cell.bring_up()
+        assert list(tmp_path.glob("speed_table_*.npz")), "configure caches the speed table"
+        cell.start_heartbeat()
+        unreachable = cell.set_speed(5.0)
+        assert unreachable.result == SetTargetSpeed.Response.REFUSED
+        assert "speed 5 m/s unreachable within the limits; reachable" in unreachable.reason
+        high = float(unreachable.reason.rsplit("..", 1)[1].split()[0])
+        target = 0.5 * high
+        answer = cell.set_speed(target)
+        assert answer.result == SetTargetSpeed.Response.ACCEPTED, answer.reason
+        assert abs(answer.predicted_speed_mps - target) < 1e-9
+        assert 10.0 <= answer.frequency_hz <= 60.0
+        assert 0.0 < answer.amplitude_percent <= 100.0
+        assert cell.trigger("start").success
+        state = cell.wait_state(DriveState.STATE_RUNNING)
+        assert state.speed_mode
+        assert abs(state.target_speed_mps - target) < 1e-12
+
+        def simulator_driven() -> bool:
+            if not carrier:
+                return False
+            last = carrier[-1]
+            return (
+                abs(last.drive_frequency_hz - answer.frequency_hz) < 1e-6
+                and abs(last.drive_amplitude_n - answer.amplitude_percent) < 1e-6  # 100 N FS
+            )
+
+        assert wait_until(simulator_driven, 20.0), carrier[-1] if carrier else "no carrier state"
+        assert cell.trigger("stop").success
+
+        def simulator_stopped() -> bool:
+            return bool(carrier) and carrier[-1].drive_amplitude_n == 0.0
+
+        assert wait_until(simulator_stopped, 20.0)
+
+
+def _registers(emulator: ControllerEmulator, names: Sequence[str]) -> list[int]:
+    m = RegisterMap()
+    return [emulator.register(getattr(m, name)) for name in names]
+
+
+def test_modbus_backend_alarm_link_loss_and_reconnect() -> None:
+    ns = "/drive_modbus"
+    port = free_port()
+    emulator = ControllerEmulator(port)
+    emulator.start()
+    params = (
+        *FAST,
+        "backend:=modbus_tcp",
+        f"modbus.port:={port}",
+        "modbus.poll_period_s:=0.02",
+        "modbus.reconnect_min_s:=0.1",
+        "modbus.reconnect_max_s:=0.5",
+        "diagnostics_period_s:=0.2",
+    )
+    try:
+        with drive_node(ns, *params) as cell:
+            cell.bring_up()
+            cell.start_heartbeat()
+
+            def diagnostic(predicate: Callable[[DiagnosticStatus, dict[str, str]], bool]) -> bool:
+                status = cell.last_diagnostic()
+                return status is not None and predicate(
+                    status, {kv.key: kv.value for kv in status.values}
+                )
+
+            assert wait_until(
+                lambda: diagnostic(lambda s, v: v.get("backend connected") == "True"), 15.0
+            )
+            assert cell.set_drive(31.5, 40.0, 0.0).result == SetDrive.Response.ACCEPTED
+            assert cell.trigger("start").success
+            cell.wait_state(DriveState.STATE_RUNNING)
+            assert wait_until(
+                lambda: (
+                    _registers(emulator, ["command", "frequency", "amplitude"])
+                    == [COMMAND_ENABLE, 315, 4000]
+                ),
+                10.0,
+            )
+            amplitudes = [w.get(RegisterMap().amplitude) for w in emulator.commands()]
+            ramp = [a for a in amplitudes if a is not None and 0 < a < 4000]
+            assert len(ramp) >= 20, "the soft start reaches the controller as a ramp"
+            assert wait_until(
+                lambda: diagnostic(
+                    lambda s, v: (
+                        s.level == DiagnosticStatus.OK
+                        and v.get("controller actual_amplitude_percent") == "40.000"
+                    )
+                ),
+                10.0,
+            )
+            state = cell.last_state()
+            assert state.backend == "modbus_tcp"
+
+            # controller-side alarm: fault, zero, reset needs the alarm acknowledged
+            emulator.raise_alarm(17)
+            fault = cell.wait_state(DriveState.STATE_FAULT)
+            assert fault.fault_reason == "backend: controller alarm (code 17)"
+            assert wait_until(lambda: emulator.register(RegisterMap().amplitude) == 0, 10.0)
+            assert wait_until(
+                lambda: diagnostic(
+                    lambda s, v: s.level == DiagnosticStatus.ERROR and "code 17" in s.message
+                ),
+                10.0,
+            )
+            first = cell.trigger("reset_fault")
+            assert not first.success
+            assert "alarm reset sent to the controller" in first.message
+            assert wait_until(lambda: cell.trigger("reset_fault").success, 10.0)
+            cell.wait_state(DriveState.STATE_IDLE)
+            assert emulator.register(RegisterMap().alarm_code) == 0
+
+            # link loss: fault with the reason, reconnect with back-off when the controller returns
+            assert cell.trigger("start").success
+            cell.wait_state(DriveState.STATE_RUNNING)
+            emulator.stop()
+            lost = cell.wait_state(DriveState.STATE_FAULT)
+            assert "backend: link to 127.0.0.1" in lost.fault_reason or (
+                "backend: cannot connect" in lost.fault_reason
+            )
+            assert lost.amplitude_percent == 0.0
+            assert wait_until(
+                lambda: diagnostic(
+                    lambda s, v: (
+                        s.level == DiagnosticStatus.ERROR
+                        and v.get("backend connected") == "False"
+                        and "retry in 0.50 s" in v.get("backend fault", "")
+                    )
+                ),
+                15.0,
+            )
+            refused = cell.trigger("reset_fault")
+            assert not refused.success
+            assert "backend still faulted" in refused.message
+            emulator.start()
+            assert wait_until(
+                lambda: diagnostic(lambda s, v: v.get("backend connected") == "True"), 15.0
+            )
+            assert wait_until(lambda: cell.trigger("reset_fault").success, 10.0)
+            status = cell.last_diagnostic()
+            assert status is not None
+            values = {kv.key: kv.value for kv in status.values}
+            assert int(values["reconnects"]) >= 2
+            assert cell.trigger("start").success
+            cell.wait_state(DriveState.STATE_RUNNING)
+            assert wait_until(lambda: emulator.register(RegisterMap().amplitude) == 4000, 10.0)
+            # deactivate ramps the controller's set point to zero and switches it off
+            assert cell.transition(Transition.TRANSITION_DEACTIVATE)
+            assert wait_until(
+                lambda: _registers(emulator, ["command", "amplitude"]) == [0, 0], 10.0
+            )
+    finally:
+        emulator.stop()
