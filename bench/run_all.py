@@ -17,7 +17,9 @@ from pathlib import Path
 HERE = Path(__file__).resolve().parent
 BENCHMARKS = [
     ("Physics core (issue 3)", "bench_physics.py"),
-    ("Bag decoding and feeder analyze", "bench_bag.py"),
+    ("Sensorless estimator against ground truth (issue 4)", "eval_estimator.py"),
+    ("Live nodes over DDS (issue 4)", "bench_live.py"),
+    ("Bag decoding and feeder analyze (issue 6)", "bench_bag.py"),
 ]
 
 

@@ -513,6 +513,7 @@ def test_modbus_backend_alarm_link_loss_and_reconnect() -> None:
         "backend:=modbus_tcp",
         f"modbus.port:={port}",
         "modbus.poll_period_s:=0.02",
+        "modbus.timeout_s:=2.0",  # the emulator shares a busy test process: no false link loss
         "modbus.reconnect_min_s:=0.1",
         "modbus.reconnect_max_s:=0.5",
         "diagnostics_period_s:=0.2",
