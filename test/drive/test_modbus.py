@@ -83,7 +83,7 @@ def link() -> Iterator[tuple[ControllerEmulator, ModbusTcpBackend]]:
     emulator = ControllerEmulator(port)
     emulator.start()
     settings = ModbusSettings(
-        port=port, timeout_s=0.5, poll_period_s=0.02, reconnect_min_s=0.05, reconnect_max_s=0.4
+        port=port, timeout_s=2.0, poll_period_s=0.02, reconnect_min_s=0.05, reconnect_max_s=0.4
     )
     backend = ModbusTcpBackend(settings, RegisterMap())
     try:
