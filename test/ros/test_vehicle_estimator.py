@@ -12,10 +12,12 @@ import numpy as np
 import pytest
 from diagnostic_msgs.msg import DiagnosticArray, DiagnosticStatus
 from rclpy.qos import QoSProfile, ReliabilityPolicy
+from rclpy.serialization import serialize_message
 from ros_test_tools import probe_node, running, wait_until
 from sensor_msgs.msg import Imu
 
 from feeder_ros.msg import DriveCommand, PartStateArray, VehicleEstimate
+from feeder_ros.nodes.vehicle_estimator import imu_sample
 
 BIN = Path(sys.executable).parent
 CONFIG = Path(__file__).resolve().parents[2] / "config" / "platform_simulator.yaml"
@@ -172,3 +174,28 @@ def test_bad_samples_are_reported_not_averaged_in() -> None:
         for k in range(20):
             send(t0 + 0.5 + k / rate, 0.0)
         assert wait_until(lambda: reported(VehicleEstimate.STATUS_OUT_OF_ORDER), 10.0)
+
+
+@pytest.mark.parametrize("frame_id", ["", "a", "carrier_imu", "x" * 13, "ümlaut"])
+def test_imu_fields_are_read_straight_from_the_cdr_bytes(frame_id: str) -> None:
+    message = Imu()
+    message.header.frame_id = frame_id
+    message.header.stamp.sec = 1_795_300_000
+    message.header.stamp.nanosec = 123_456_789
+    message.orientation.w = 7.0  # fields before the acceleration must be skipped, not read
+    message.angular_velocity_covariance[8] = -1.0
+    message.linear_acceleration.x = 0.123456789
+    message.linear_acceleration.y = -2.5
+    message.linear_acceleration.z = math.nan
+    stamp, (x, y, z) = imu_sample(serialize_message(message))
+    assert stamp == pytest.approx(1_795_300_000.123456789, abs=1e-6)
+    assert (x, y) == (0.123456789, -2.5)
+    assert math.isnan(z)
+
+
+def test_malformed_imu_bytes_are_refused_with_the_reason() -> None:
+    data = serialize_message(Imu())
+    with pytest.raises(ValueError, match="truncated Imu message"):
+        imu_sample(data[:240])  # cut inside linear_acceleration
+    with pytest.raises(ValueError, match="not a CDR message"):
+        imu_sample(b"\x07\x07" + data[2:])
