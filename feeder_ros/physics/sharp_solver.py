@@ -20,8 +20,21 @@ are found with provably safe steps: with ``|f''| <= B`` on ``[tau, inf)`` (the h
 decay, so the bound at ``tau`` holds for all later times) the lower bound ``f + f'*h - B*h^2/2``
 stays positive up to the step ``h*``; the search advances by the smallest ``h*`` of all functions,
 so it can never jump over a root, and converges quadratically onto the first root from the safe
-side. A function that starts a piece at zero (just after its own event) is released by the sign of
-its first non-vanishing derivative (order 1 to 3).
+side. A second lower bound takes the drive's sinusoid at its worst (``-amplitude``) and bounds only
+the homogeneous terms' curvature; the longer of the two safe steps is taken. A function that
+starts a piece at zero (just after its own event) is released by the sign of its first
+non-vanishing derivative (order 1 to 3).
+
+At each stop the stepping skips the functions proven positive well beyond it (``f_skip``: the
+release offset, or the end of a safe step reaching more than 8 steps ahead). With one-way coupling
+a part event does not change the carrier, so :func:`advance` continues the same closed-form piece
+after it (the part's polynomials are then written in the time since the event) instead of
+restarting the carrier.
+Output samples on a uniform grid are evaluated from one directly evaluated basis by the exact
+shift identities (``C(t+h) = C(h)C(t) + lambda*S(h)S(t)``, ``S(t+h) = S(h)C(t) + C(h)S(t)``, the
+drive's angle addition) with tabulated shifts ``j*h`` (no error accumulation), plus a first-order
+term for the round-off difference between a sample's time and ``t_base + j*h``. ``_sincos``
+shares one argument reduction between sine and cosine (fdlibm kernels, within 1 ulp of libm).
 
 Parts are handled in *groups*: parts with the same friction (``L = mu_s*g*kappa``, ``D =
 mu_d*g*kappa``) that stick at the same time have identical velocity forever after, so a group
@@ -92,9 +105,10 @@ STATUS_RESONANCE = 2
 STATUS_STUCK = 3
 
 NROWS = 10
+N_ROT = 64  # output samples evaluated from one directly evaluated basis by exact shifts
 
 
-@njit(cache=True)
+@njit(cache=True, inline="always")
 def _fill_rows(rows, sigma, lam, A, w, phi, m, c, k, F0, x0, v0, held):
     """Coefficient rows of x, x', ..., x^(5) (rows 0-5) and F, ..., F''' (rows 6-9); False at
     resonance."""
@@ -111,8 +125,7 @@ def _fill_rows(rows, sigma, lam, A, w, phi, m, c, k, F0, x0, v0, held):
         P = A * detune / det
         Q = -A * c * w / det
         X0 = F0 / k
-        sp = math.sin(phi)
-        cp = math.cos(phi)
+        sp, cp = _sincos(phi)
         al = x0 - (P * sp + Q * cp + X0)
         be = (v0 - w * (P * cp - Q * sp)) - sigma * al
         rows[0, 0] = al
@@ -134,12 +147,79 @@ def _fill_rows(rows, sigma, lam, A, w, phi, m, c, k, F0, x0, v0, held):
     return True
 
 
+# sin and cos sharing one argument reduction (fdlibm's __kernel_sin/__kernel_cos and the
+# three-part Cody-Waite reduction of __ieee754_rem_pio2): within 1 ulp, like libm, and about
+# half the cost of the two calls; arguments beyond SINCOS_MAX go to libm
+_S1 = -1.66666666666666324348e-01
+_S2 = 8.33333333332248946124e-03
+_S3 = -1.98412698298579493134e-04
+_S4 = 2.75573137070700676789e-06
+_S5 = -2.50507602534068634195e-08
+_S6 = 1.58969099521155010221e-10
+_C1 = 4.16666666666666019037e-02
+_C2 = -1.38888888888741095749e-03
+_C3 = 2.48015872894767294178e-05
+_C4 = -2.75573143513906633035e-07
+_C5 = 2.08757232129817482790e-09
+_C6 = -1.13596475577881948265e-11
+_INVPIO2 = 6.36619772367581382433e-01
+_PIO2_1 = 1.57079632673412561417e00  # first 33 bits of pi/2
+_PIO2_1T = 6.07710050650619224932e-11  # pi/2 - _PIO2_1
+_PIO2_2 = 6.07710050630396597660e-11  # second 33 bits
+_PIO2_2T = 2.02226624879595063154e-21
+_PIO2_3 = 2.02226624871116645580e-21  # third 33 bits
+_PIO2_3T = 8.47842766036889956997e-32
+SINCOS_MAX = 1e5
+
+
+@njit(cache=True, inline="always")
+def _sincos(x):
+    """(sin(x), cos(x))."""
+    if not abs(x) <= SINCOS_MAX:
+        return math.sin(x), math.cos(x)
+    fn = math.floor(x * _INVPIO2 + 0.5)
+    r = x - fn * _PIO2_1  # exact: fn has at most 17 bits
+    w = fn * _PIO2_1T
+    y0 = r - w
+    if abs(y0) < abs(x) * 1.52587890625e-05:  # more than 16 bits cancelled: second round
+        t = r
+        w = fn * _PIO2_2
+        r = t - w
+        w = fn * _PIO2_2T - ((t - r) - w)
+        y0 = r - w
+        if abs(y0) < abs(x) * 1.7763568394002505e-15:  # more than 49 bits: third round
+            t = r
+            w = fn * _PIO2_3
+            r = t - w
+            w = fn * _PIO2_3T - ((t - r) - w)
+            y0 = r - w
+    y1 = (r - y0) - w
+    z = y0 * y0
+    zz = z * z
+    v = z * y0
+    rs = _S2 + z * (_S3 + z * _S4) + z * zz * (_S5 + z * _S6)
+    sn = y0 - ((z * (0.5 * y1 - v * rs) - y1) - v * _S1)
+    rc = z * (_C1 + z * (_C2 + z * _C3)) + zz * zz * (_C4 + z * (_C5 + z * _C6))
+    hz = 0.5 * z
+    w1 = 1.0 - hz
+    cs = w1 + (((1.0 - w1) - hz) + (z * rc - y0 * y1))
+    n = int(fn) & 3
+    if n == 0:
+        return sn, cs
+    if n == 1:
+        return cs, -sn
+    if n == 2:
+        return -sn, -cs
+    return -cs, sn
+
+
 @njit(cache=True, inline="always")
 def _basis(tau, sigma, lam, root, r1, w, phi):
     if lam < 0.0:
         e = 1.0 if sigma == 0.0 else math.exp(sigma * tau)
-        cc = e * math.cos(root * tau)
-        ss = e * math.sin(root * tau) / root
+        sh, ch = _sincos(root * tau)
+        cc = e * ch
+        ss = e * sh / root
     elif lam > 0.0:
         r2 = sigma - root
         if 2.0 * root * tau < 1.0:
@@ -157,7 +237,8 @@ def _basis(tau, sigma, lam, root, r1, w, phi):
         cc = e
         ss = tau * e
     ang = w * tau + phi
-    return cc, ss, math.sin(ang), math.cos(ang)
+    sa, ca = _sincos(ang)
+    return cc, ss, sa, ca
 
 
 @njit(cache=True, inline="always")
@@ -195,8 +276,9 @@ def _basis_all(tau, sigma, lam, root, r1, w, phi):
             tm = -1.0 / sigma
             sup = tau * e if tau >= tm else tm * math.exp(-1.0)
             bs = min(e / root, sup)
-        cc = e * math.cos(root * tau)
-        ss = e * math.sin(root * tau) / root
+        sh, ch = _sincos(root * tau)
+        cc = e * ch
+        ss = e * sh / root
         bc = e
     elif lam > 0.0:
         r2 = sigma - root
@@ -222,7 +304,8 @@ def _basis_all(tau, sigma, lam, root, r1, w, phi):
         bc = e
         bs = tau * e if tau >= tm else tm * math.exp(-1.0)
     ang = w * tau + phi
-    return cc, ss, math.sin(ang), math.cos(ang), bc, bs
+    sa, ca = _sincos(ang)
+    return cc, ss, sa, ca, bc, bs
 
 
 @njit(cache=True, inline="always")
@@ -270,7 +353,7 @@ P_ROWS = 12
 PIECE_WIDTH = P_ROWS + 30
 
 
-@njit(cache=True)
+@njit(cache=True, inline="always")
 def _record_piece(pieces, k, t0, length, sigma, lam, root, r1, w, phi, mode, rows, xe, ve, ae):
     pieces[k, P_XE] = xe
     pieces[k, P_VE] = ve
@@ -296,7 +379,7 @@ REL_NEVER = 2  # identically zero (e.g. a carrier at rest without drive): no eve
 REL_NOW = 3  # at or across its zero, moving out: an event now
 
 
-@njit(cache=True)
+@njit(cache=True, inline="always")
 def _release(rows, r, sg, c0, c1, c2, T, cc, ss, sn, cs, bc, bs, der):
     """Classify the event function ``sg*row_r + c0 + c1*s + c2*s^2`` at the start ``s = 0``.
 
@@ -304,11 +387,17 @@ def _release(rows, r, sg, c0, c1, c2, T, cc, ss, sn, cs, bc, bs, der):
     zero (just after its own event) is released when its first non-vanishing derivative (order 1-3)
     points inward: the Taylor lower bound then proves it positive from the returned offset on.
     """
+    # a clear margin against an upper bound of the scale (|P| + |Q| for the sinusoid's amplitude)
+    # decides the common case without the square root
+    f = sg * _row(rows, r, cc, ss, sn, cs) + c0
+    upper = abs(rows[r, 0]) * bc + abs(rows[r, 1]) * bs + abs(rows[r, 2]) + abs(rows[r, 3])
+    upper = abs(sg) * (upper + abs(rows[r, 4])) + abs(c0)
+    if f > 64.0 * EPS * upper and not (sg == 0.0 and c1 == 0.0 and c0 > 0.0):
+        return REL_FREE, 0.0
     scale = abs(sg) * _row_bound(rows, r, bc, bs) + abs(c0)
     if scale == 0.0 or (sg == 0.0 and c1 == 0.0 and c0 > 0.0):
         return REL_NEVER, 0.0
     tol = 64.0 * EPS * scale
-    f = sg * _row(rows, r, cc, ss, sn, cs) + c0
     if f > tol:
         return REL_FREE, 0.0
     der[0] = f
@@ -393,6 +482,21 @@ def _classify(switch, mode_prev, x, v, F, dF, F0, m, kf, kb):
 
 
 @njit(cache=True)
+def check_samples(samples):
+    """0 if the sample times are finite and sorted, 1 if one is not finite, 2 if unsorted."""
+    prev = -np.inf
+    unsorted = False
+    for i in range(samples.shape[0]):
+        t = samples[i]
+        if not math.isfinite(t):
+            return 1
+        if t < prev:
+            unsorted = True
+        prev = t
+    return 2 if unsorted else 0
+
+
+@njit(cache=True, inline="always")
 def _log(ev_t, ev_kind, ev_part, counters, t, kind, part):
     n = counters[1]
     ev_t[n] = t
@@ -401,7 +505,7 @@ def _log(ev_t, ev_kind, ev_part, counters, t, kind, part):
     counters[1] = n + 1
 
 
-@njit(cache=True)
+@njit(cache=True, inline="always")
 def _log_group(ev_t, ev_kind, ev_part, counters, t, kind, g, g_head, m_next):
     i = g_head[g]
     while i >= 0:
@@ -409,7 +513,7 @@ def _log_group(ev_t, ev_kind, ev_part, counters, t, kind, g, g_head, m_next):
         i = m_next[i]
 
 
-@njit(cache=True)
+@njit(cache=True, inline="always")
 def _group_lead(g, g_head, m_next, m_o):
     lead = -np.inf
     i = g_head[g]
@@ -492,6 +596,7 @@ def advance(
     f_c2 = np.zeros(nfmax)
     f_skip = np.zeros(nfmax)
     f_zero = np.zeros(nfmax, np.bool_)
+    f_eval = np.zeros(nfmax, np.bool_)
     vals = np.zeros(NROWS)
     r_abs_a = np.zeros(NROWS)
     r_abs_b = np.zeros(NROWS)
@@ -499,102 +604,146 @@ def advance(
     r_R = np.zeros(NROWS)
     der = np.zeros(5)
     bnds = np.zeros(NROWS)
+    hbnds = np.zeros(NROWS)
     gu_k = np.zeros(n_groups)
     gy_k = np.zeros(n_groups)
     zero_count = 0
-    h_rec = -1.0
-    ch = 1.0
-    sh = 0.0
-    sw = 0.0
-    cw = 1.0
+    # output samples: the basis is shifted by the nominal spacing h_nom between samples
+    h_nom = 0.0
+    if n_samples >= 2:
+        h_nom = (samples[n_samples - 1] - samples[0]) / (n_samples - 1)
+    rot_key = np.full((2, 3), np.nan)
+    rot = np.zeros((2, N_ROT, 4))
+    rot_n = np.ones(2, np.int64)
 
     record = pieces.shape[0] > 0
+    # a part event with one-way coupling leaves the carrier's closed form as it is: the loop then
+    # continues the same piece from the event's local time ts (cont) instead of restarting it
+    cont = False
+    ts = 0.0
+    xs = 0.0
+    vs = 0.0
+    tb = 0.0
+    jb = N_ROT
+    cb = 1.0
+    sb = 0.0
+    snb = 0.0
+    csb = 1.0
+    n_cf = 0
+    t0 = 0.0
+    x0 = 0.0
+    v0 = 0.0
+    mode = 1.0
+    seg = 0
+    w = 0.0
+    A = 0.0
+    phi = 0.0
+    piece_end = 0.0
+    drive_end = False
+    T = 0.0
+    m = 1.0
+    F0 = 0.0
+    held = False
+    k = 0.0
+    sigma = 0.0
+    lam = 0.0
+    root = 0.0
+    r1 = 0.0
     while True:
-        t0 = state[S_T]
-        if t0 >= t_end:
-            break
+        if not cont:
+            t0 = state[S_T]
+            if t0 >= t_end:
+                break
         if (log_events and counters[1] + n_members + 2 > cap) or (
             record and counters[4] + 1 > pieces.shape[0]
         ):
             counters[2] = STATUS_BUFFER_FULL
             return STATUS_BUFFER_FULL
-        x0 = state[S_X]
-        v0 = state[S_V]
-        mode = state[S_MODE]
-        seg = int(state[S_SEG])
-        nseg = d_start.shape[0]
-        while seg + 1 < nseg and d_start[seg + 1] <= t0:
-            seg += 1
-        state[S_SEG] = seg
-        w = d_omega[seg]
-        A = d_amp[seg]
-        phi = np.fmod(d_phase[seg] + w * (t0 - d_start[seg]), 2.0 * math.pi)
-        piece_end = t_end
-        drive_end = False
-        if seg + 1 < nseg and d_start[seg + 1] < t_end:
-            piece_end = d_start[seg + 1]
-            drive_end = True
-        T = piece_end - t0
+        if not cont:
+            ts = 0.0
+            x0 = state[S_X]
+            v0 = state[S_V]
+            mode = state[S_MODE]
+            seg = int(state[S_SEG])
+            nseg = d_start.shape[0]
+            while seg + 1 < nseg and d_start[seg + 1] <= t0:
+                seg += 1
+            state[S_SEG] = seg
+            w = d_omega[seg]
+            A = d_amp[seg]
+            phi = np.fmod(d_phase[seg] + w * (t0 - d_start[seg]), 2.0 * math.pi)
+            piece_end = t_end
+            drive_end = False
+            if seg + 1 < nseg and d_start[seg + 1] < t_end:
+                piece_end = d_start[seg + 1]
+                drive_end = True
+            T = piece_end - t0
 
-        # carrier mass and parts' reaction force
-        if two_way:
-            m = model[M_BASE]
-            F0 = 0.0
-            for g in range(n_groups):
-                if g_head[g] < 0:
-                    continue
-                if g_phase[g] == STICK:
-                    m += g_mass[g]
-                elif g_phase[g] == SLIP_BACKWARD:
-                    F0 -= g_mass[g] * g_D[g]
-                else:
-                    F0 += g_mass[g] * g_D[g]
-        else:
-            m = model[M_ONEWAY]
-            F0 = 0.0
-        held = mode == 0.0
-        k = kf if mode >= 0.0 else kb
-        sigma = -c / (2.0 * m)
-        lam = sigma * sigma - k / m
-        root = math.sqrt(abs(lam))
-        r1 = 0.0
-        if lam > 0.0:
-            r1 = (k / m) / (sigma - root)
-        if not _fill_rows(rows, sigma, lam, A, w, phi, m, c, k, F0, x0, v0, held):
-            counters[2] = STATUS_RESONANCE
-            return STATUS_RESONANCE
+            # carrier mass and parts' reaction force
+            if two_way:
+                m = model[M_BASE]
+                F0 = 0.0
+                for g in range(n_groups):
+                    if g_head[g] < 0:
+                        continue
+                    if g_phase[g] == STICK:
+                        m += g_mass[g]
+                    elif g_phase[g] == SLIP_BACKWARD:
+                        F0 -= g_mass[g] * g_D[g]
+                    else:
+                        F0 += g_mass[g] * g_D[g]
+            else:
+                m = model[M_ONEWAY]
+                F0 = 0.0
+            held = mode == 0.0
+            k = kf if mode >= 0.0 else kb
+            sigma = -c / (2.0 * m)
+            lam = sigma * sigma - k / m
+            root = math.sqrt(abs(lam))
+            r1 = 0.0
+            if lam > 0.0:
+                r1 = (k / m) / (sigma - root)
+            if not _fill_rows(rows, sigma, lam, A, w, phi, m, c, k, F0, x0, v0, held):
+                counters[2] = STATUS_RESONANCE
+                return STATUS_RESONANCE
+            xs = x0
+            vs = v0
 
         # ---- event functions of this piece
-        nf = 0
-        if not held:
-            f_kind[nf] = F_BRANCH
-            f_row[nf] = switch
-            f_sgn[nf] = mode
-            f_c0[nf] = 0.0
-            f_c1[nf] = 0.0
-            f_c2[nf] = 0.0
-            nf += 1
-        else:
-            f_kind[nf] = F_SLIDE_FWD
-            f_row[nf] = 6
-            f_sgn[nf] = -1.0
-            f_c0[nf] = -(F0 - kf * x0)
-            f_c1[nf] = 0.0
-            f_c2[nf] = 0.0
-            nf += 1
-            f_kind[nf] = F_SLIDE_BWD
-            f_row[nf] = 6
-            f_sgn[nf] = 1.0
-            f_c0[nf] = F0 - kb * x0
-            f_c1[nf] = 0.0
-            f_c2[nf] = 0.0
-            nf += 1
+        # (the carrier's functions keep their state when the piece continues after a part event)
+        nf = n_cf
+        if not cont:
+            nf = 0
+            if not held:
+                f_kind[nf] = F_BRANCH
+                f_row[nf] = switch
+                f_sgn[nf] = mode
+                f_c0[nf] = 0.0
+                f_c1[nf] = 0.0
+                f_c2[nf] = 0.0
+                nf += 1
+            else:
+                f_kind[nf] = F_SLIDE_FWD
+                f_row[nf] = 6
+                f_sgn[nf] = -1.0
+                f_c0[nf] = -(F0 - kf * x0)
+                f_c1[nf] = 0.0
+                f_c2[nf] = 0.0
+                nf += 1
+                f_kind[nf] = F_SLIDE_BWD
+                f_row[nf] = 6
+                f_sgn[nf] = 1.0
+                f_c0[nf] = F0 - kb * x0
+                f_c1[nf] = 0.0
+                f_c2[nf] = 0.0
+                nf += 1
+            n_cf = nf
         lmin = np.inf
         for g in range(n_groups):
             if g_head[g] < 0:
                 continue
             if g_phase[g] == STICK:
-                g_u[g] = v0
+                g_u[g] = vs
                 if g_L[g] < lmin:
                     lmin = g_L[g]
                 if g_lead[g] + g_y[g] >= track:
@@ -621,7 +770,7 @@ def advance(
                 f_group[nf] = g
                 f_row[nf] = 0
                 f_sgn[nf] = 1.0
-                f_c0[nf] = track - g_lead[g] - g_y[g] - x0
+                f_c0[nf] = track - g_lead[g] - g_y[g] - xs
                 f_c1[nf] = -g_u[g]
                 f_c2[nf] = -0.5 * ap
                 nf += 1
@@ -641,22 +790,41 @@ def advance(
             f_c2[nf] = 0.0
             nf += 1
 
-        # ---- release functions that start on (or across) their zero
-        cc = 1.0
-        ss = 0.0
-        sn = math.sin(phi)
-        cs = math.cos(phi)
-        bc, bs = _basis_bounds(0.0, sigma, lam, root, r1)
+        # ---- release functions that start on (or across) their zero (at ts; the part's
+        # polynomials are in s = tau - ts)
+        if ts == 0.0:
+            cc = 1.0
+            ss = 0.0
+            sn, cs = _sincos(phi)
+            bc, bs = _basis_bounds(0.0, sigma, lam, root, r1)
+        else:
+            cc, ss, sn, cs, bc, bs = _basis_all(ts, sigma, lam, root, r1, w, phi)
         stick_bound = _row_bound(rows, 2, bc, bs)
         tau_e = T
         hit = -1
         for i in range(nf):
-            code, f_skip[i] = _release(
-                rows, f_row[i], f_sgn[i], f_c0[i], f_c1[i], f_c2[i], T, cc, ss, sn, cs, bc, bs, der
+            f_eval[i] = False
+        for i in range(n_cf if cont else 0, nf):
+            code, s_rel = _release(
+                rows,
+                f_row[i],
+                f_sgn[i],
+                f_c0[i],
+                f_c1[i],
+                f_c2[i],
+                T - ts,
+                cc,
+                ss,
+                sn,
+                cs,
+                bc,
+                bs,
+                der,
             )
+            f_skip[i] = ts + s_rel
             f_zero[i] = code == REL_NEVER
             if code == REL_NOW:
-                tau_e = 0.0
+                tau_e = ts
                 hit = i
                 break
             if (f_kind[i] == F_STICK_UP or f_kind[i] == F_STICK_DOWN) and stick_bound < lmin:
@@ -678,12 +846,15 @@ def advance(
             r_R[r] = np.inf
             if lam < 0.0:
                 r_R[r] = math.sqrt(rows[r, 0] ** 2 + (rows[r, 1] / root) ** 2)
-        tau = 0.0
+        tau = ts
         e_cc, e_ss, e_sn, e_cs = cc, ss, sn, cs
         if hit < 0:
             for r in range(6):
                 vals[r] = 0.0
                 bnds[r] = 0.0
+            # undamped: the basis bounds (1, 1/root) and so the row bounds are constant
+            const_bounds = sigma == 0.0 and lam < 0.0
+            bounds_done = False
             while True:
                 cc, ss, sn, cs, bc, bs = _basis_all(tau, sigma, lam, root, r1, w, phi)
                 if held:
@@ -691,80 +862,131 @@ def advance(
                     bnds[0] = abs(rows[0, 4])
                 for r in range(lo, hi_r):
                     vals[r] = _row(rows, r, cc, ss, sn, cs)
-                    bh = r_abs_a[r] * bc + r_abs_b[r] * bs
-                    bR = r_R[r] * bc
-                    bnds[r] = (bh if bh < bR else bR) + r_amp[r] + abs(rows[r, 4])
+                if not bounds_done:
+                    for r in range(lo, hi_r):
+                        bh = r_abs_a[r] * bc + r_abs_b[r] * bs
+                        bR = r_R[r] * bc
+                        hbnds[r] = bh if bh < bR else bR
+                        bnds[r] = hbnds[r] + r_amp[r] + abs(rows[r, 4])
+                    bounds_done = const_bounds
                 t_res = 8.0 * EPS * (abs(t0) + tau + 1e-3)
-                h = T - tau
+                # the next stop: each function is provably positive before f_skip[i] (its release
+                # offset, or the end of its last safe step), so only the functions whose interval
+                # ends here are evaluated again
+                t_next = T
                 for i in range(nf):
                     if f_zero[i]:
                         continue
                     if tau < f_skip[i]:
-                        hi = f_skip[i] - tau
-                        if hi < h:
-                            h = hi
+                        if f_skip[i] < t_next:
+                            t_next = f_skip[i]
                         continue
                     r = f_row[i]
                     sg = f_sgn[i]
-                    poly = f_c0[i] + tau * (f_c1[i] + tau * f_c2[i])
+                    sp = tau - ts
+                    poly = f_c0[i] + sp * (f_c1[i] + sp * f_c2[i])
                     f = sg * vals[r] + poly
-                    scale = abs(sg) * bnds[r] + abs(f_c0[i]) + tau * abs(f_c1[i])
-                    scale += tau * tau * abs(f_c2[i])
+                    scale = abs(sg) * bnds[r] + abs(f_c0[i]) + sp * abs(f_c1[i])
+                    scale += sp * sp * abs(f_c2[i])
                     if f <= 64.0 * EPS * scale:
                         hit = i
                         break
-                    d = sg * vals[r + 1] + f_c1[i] + 2.0 * tau * f_c2[i]
+                    d = sg * vals[r + 1] + f_c1[i] + 2.0 * sp * f_c2[i]
                     B = abs(sg) * bnds[r + 2] + 2.0 * abs(f_c2[i])
                     f2 = sg * vals[r + 2] + 2.0 * f_c2[i]
-                    h1 = _step(f, d, B, f2, abs(sg) * bnds[r + 3], h)
+                    h1 = _step(f, d, B, f2, abs(sg) * bnds[r + 3], t_next - tau)
+                    if h1 < t_next - tau and not held:
+                        # second lower bound: the drive's sinusoid at its worst, the homogeneous
+                        # terms with their own (slower) curvature bound
+                        asg = abs(sg)
+                        g = f - sg * (rows[r, 2] * sn + rows[r, 3] * cs) - asg * r_amp[r]
+                        if g > 0.0:
+                            dh = d - sg * (rows[r + 1, 2] * sn + rows[r + 1, 3] * cs)
+                            h_alt = _safe_step(g, dh, asg * hbnds[r + 2] + 2.0 * abs(f_c2[i]))
+                            if h_alt > h1:
+                                h1 = h_alt if h_alt < t_next - tau else t_next - tau
                     if h1 <= t_res:
                         hit = i
                         break
-                    if h1 < h:
-                        h = h1
+                    f_skip[i] = tau + h1
+                    f_eval[i] = True
+                    if f_skip[i] < t_next:
+                        t_next = f_skip[i]
                 if hit >= 0:
                     tau_e = tau
                     e_cc, e_ss, e_sn, e_cs = cc, ss, sn, cs
                     break
-                if h >= T - tau:
+                if t_next >= T:
                     tau_e = T
                     break
-                tau += h
+                # a function whose interval ends soon is evaluated again at the next stop anyway
+                # (a fresh step from there is usually longer than the rest of the old one)
+                t_near = tau + 8.0 * (t_next - tau)
+                for i in range(nf):
+                    if f_eval[i]:
+                        f_eval[i] = False
+                        if f_skip[i] < t_near:
+                            f_skip[i] = 0.0
+                tau = t_next
                 counters[3] += 1
 
         # ---- samples in [t0, t0 + tau_e)  (the last piece of the run includes t_end)
         last = hit < 0 and not drive_end
         t_stop = t0 + tau_e
         ns = counters[0]
-        n_rec = 0
-        h_rec = -1.0
-        tk_prev = 0.0
-        cc_k = 1.0
-        ss_k = 0.0
-        sn_k = 0.0
-        cs_k = 1.0
+        can_rot = h_nom > 0.0 and ns + 1 < n_samples and samples[ns + 1] <= t_stop
+        slot = 0 if mode >= 0.0 else 1
+        if can_rot and (
+            rot_key[slot, 0] != sigma or rot_key[slot, 1] != lam or rot_key[slot, 2] != w
+        ):
+            # the shifts by j*h_nom of this basis, filled on demand (cached per branch: the
+            # pieces alternate between two parameter sets)
+            rot_key[slot, 0] = sigma
+            rot_key[slot, 1] = lam
+            rot_key[slot, 2] = w
+            rot_n[slot] = 1
+        # the first-order correction below is exact to round-off for |dt|*omega <= 1e-8
+        eps_rec = 1e-8 / (abs(sigma) + root + w + 1e-300)
+        if not cont:
+            # a new closed form: the next sample is evaluated directly (a continued piece keeps
+            # its last directly evaluated sample as the base of the shifts)
+            tb = 0.0
+            jb = N_ROT
         while ns < n_samples and (samples[ns] < t_stop or (last and samples[ns] <= t_end)):
             tk = samples[ns] - t0
-            dt = tk - tk_prev
-            if n_rec > 0 and n_rec < 64 and abs(dt - h_rec) <= 1e-12 * h_rec:
+            direct = True
+            if can_rot and jb + 1 < N_ROT:
                 # exact shift identities C(t+h) = C(h)C + lam*S(h)S, S(t+h) = S(h)C + C(h)S
-                c_new = ch * cc_k + lam * sh * ss_k
-                ss_k = sh * cc_k + ch * ss_k
-                cc_k = c_new
-                s_new = sn_k * cw + cs_k * sw
-                cs_k = cs_k * cw - sn_k * sw
-                sn_k = s_new
-                n_rec += 1
-            else:
-                cc_k, ss_k, sn_k, cs_k = _basis(tk, sigma, lam, root, r1, w, phi)
-                n_rec = 1
-                if ns + 1 < n_samples:
-                    h_new = samples[ns + 1] - samples[ns]
-                    if h_new > 0.0 and h_new != h_rec:
-                        h_rec = h_new
-                        ch, sh, sw, cw = _basis(h_rec, sigma, lam, root, r1, w, 0.0)
-            tk_prev = tk
-            cc, ss, sn, cs = cc_k, ss_k, sn_k, cs_k
+                # from the last directly evaluated sample give the basis at tb + (jb+1)*h_nom;
+                # a first-order Taylor term absorbs the round-off difference dt to the sample
+                jb += 1
+                dt = tk - (tb + jb * h_nom)
+                if abs(dt) <= eps_rec:
+                    if jb >= rot_n[slot]:
+                        rc, rs, rsw, rcw = _basis(jb * h_nom, sigma, lam, root, r1, w, 0.0)
+                        rot[slot, jb, 0] = rc
+                        rot[slot, jb, 1] = rs
+                        rot[slot, jb, 2] = rsw
+                        rot[slot, jb, 3] = rcw
+                        rot_n[slot] = jb + 1
+                    ch = rot[slot, jb, 0]
+                    sh = rot[slot, jb, 1]
+                    sw = rot[slot, jb, 2]
+                    cw = rot[slot, jb, 3]
+                    cr = ch * cb + lam * sh * sb
+                    sr = sh * cb + ch * sb
+                    snr = snb * cw + csb * sw
+                    csr = csb * cw - snb * sw
+                    cc = cr + dt * (sigma * cr + lam * sr)
+                    ss = sr + dt * (sigma * sr + cr)
+                    sn = snr + dt * (w * csr)
+                    cs = csr - dt * (w * snr)
+                    direct = False
+            if direct:
+                cb, sb, snb, csb = _basis(tk, sigma, lam, root, r1, w, phi)
+                tb = tk
+                jb = 0
+                cc, ss, sn, cs = cb, sb, snb, csb
             xk = _row(rows, 0, cc, ss, sn, cs)
             vk = 0.0 if held else _row(rows, 1, cc, ss, sn, cs)
             ak = 0.0 if held else _row(rows, 2, cc, ss, sn, cs)
@@ -781,8 +1003,9 @@ def advance(
                         gy_k[g] = g_y[g]
                     else:
                         ap = g_D[g] if g_phase[g] == SLIP_BACKWARD else -g_D[g]
-                        gu_k[g] = g_u[g] + ap * tk
-                        gy_k[g] = g_y[g] + tk * (g_u[g] + 0.5 * ap * tk) - (xk - x0)
+                        sk = tk - ts
+                        gu_k[g] = g_u[g] + ap * sk
+                        gy_k[g] = g_y[g] + sk * (g_u[g] + 0.5 * ap * sk) - (xk - xs)
                 for j in range(n_members):
                     g = m_group[j]
                     if g < 0:
@@ -814,9 +1037,10 @@ def advance(
                 g_u[g] = ve
             else:
                 ap = g_D[g] if g_phase[g] == SLIP_BACKWARD else -g_D[g]
-                g_y[g] += tau_e * (g_u[g] + 0.5 * ap * tau_e) - (xe - x0)
-                g_u[g] += ap * tau_e
-                g_slip[g] += tau_e
+                se = tau_e - ts
+                g_y[g] += se * (g_u[g] + 0.5 * ap * se) - (xe - xs)
+                g_u[g] += ap * se
+                g_slip[g] += se
         if record and tau_e > 0.0:
             _record_piece(
                 pieces, counters[4], t0, tau_e, sigma, lam, root, r1, w, phi, mode, rows, xe, ve, ae
@@ -825,6 +1049,7 @@ def advance(
         state[S_T] = te
         state[S_X] = xe
         state[S_V] = ve
+        cont = False
         if hit < 0:
             if drive_end:
                 state[S_T] = piece_end
@@ -836,7 +1061,7 @@ def advance(
             break
 
         # ---- one event at te (exits always progress: they do not count as repeats)
-        if tau_e == 0.0 and f_kind[hit] != F_EXIT:
+        if tau_e == ts and f_kind[hit] != F_EXIT:
             zero_count += 1
             if zero_count > 1000:
                 counters[2] = STATUS_STUCK
@@ -941,6 +1166,12 @@ def advance(
                 g_lead[g] = _group_lead(g, g_head, m_next, m_o)
             if log_events:
                 _log(ev_t, ev_kind, ev_part, counters, te, EV_EXIT, lead_i)
+        if not two_way and not record and kind >= F_STICK_UP:
+            # a part event: the carrier's piece goes on from here
+            cont = True
+            ts = tau_e
+            xs = xe
+            vs = ve
     counters[2] = STATUS_DONE
     return STATUS_DONE
 
@@ -1122,8 +1353,7 @@ def _march_group(
             r_R[r] = np.inf
             if lam < 0.0:
                 r_R[r] = math.sqrt(rows[r, 0] ** 2 + (rows[r, 1] / root) ** 2)
-        sphi = math.sin(phi)
-        cphi = math.cos(phi)
+        sphi, cphi = _sincos(phi)
         last = k == n_pieces - 1
         ts = 0.0  # start of the current sub-piece (local time)
         while True:

@@ -45,6 +45,7 @@ independently, in parallel (numba ``prange``); group events are expanded to one 
 from __future__ import annotations
 
 import enum
+import functools
 import math
 from collections.abc import Sequence
 from dataclasses import dataclass, replace
@@ -241,7 +242,13 @@ def _model_vector(params: FeederParameters, log_events: bool = True) -> F64:
 
 
 def _default_drive(params: FeederParameters) -> DriveSchedule:
-    return DriveSchedule(params.drive_frequency_hz, params.drive_amplitude_n)
+    return _constant_drive(params.drive_frequency_hz, params.drive_amplitude_n)
+
+
+@functools.lru_cache(maxsize=256)
+def _constant_drive(frequency_hz: float, amplitude_n: float) -> DriveSchedule:
+    # a schedule is immutable and caches its segments: simulators of one operating point share it
+    return DriveSchedule(frequency_hz, amplitude_n)
 
 
 class FeederSimulator:
@@ -392,6 +399,9 @@ class FeederSimulator:
         if N == 0:
             return
         kappa_g = self._params.gravity_mps2 * self._params.friction_multiplier
+        if N <= 64:
+            self._spawn_few(specs, kappa_g)
+            return
         resolved = np.array([spec.resolved(self._params) for spec in specs], dtype=np.float64)
         mass = resolved[:, 0]
         friction = resolved[:, 1:] * kappa_g
@@ -420,6 +430,46 @@ class FeederSimulator:
         m.next = nxt
         m.offset = offset
         m.mass = mass.copy()
+        m.slip0 = np.zeros(N)
+        m.exit_t = np.full(N, np.nan)
+        m.start_t = np.zeros(N)
+        m.start_x = offset + self._state[_k.S_X]
+        self._g, self._m = g, m
+
+    def _spawn_few(self, specs: Sequence[PartSpec], kappa_g: float) -> None:
+        """:meth:`_spawn_initial` for a few parts: the same arrays, built in plain Python (the
+        vectorised form costs more than the simulation of a short run)."""
+        N = len(specs)
+        resolved = [spec.resolved(self._params) for spec in specs]
+        friction = [(mu_s * kappa_g, mu_d * kappa_g) for _, mu_s, mu_d in resolved]
+        keys = sorted(set(friction))  # the order of np.unique(axis=0)
+        index = {key: i for i, key in enumerate(keys)}
+        G = len(keys)
+        group = np.array([index[f] for f in friction], np.int64)
+        offset = np.array([spec.position_m for spec in specs], dtype=np.float64)
+        mass = np.array([r[0] for r in resolved], dtype=np.float64)
+        g = _Groups(G)
+        g.L[:] = [key[0] for key in keys]
+        g.D[:] = [key[1] for key in keys]
+        g.u[:] = self._state[_k.S_V]
+        nxt = np.full(N, -1, np.int64)
+        last = [-1] * G
+        for i in range(N):
+            gi = int(group[i])
+            g.mass[gi] += mass[i]
+            if offset[i] > g.lead[gi]:
+                g.lead[gi] = offset[i]
+            if last[gi] < 0:
+                g.head[gi] = i
+            else:
+                nxt[last[gi]] = i
+            last[gi] = i
+        m = _Members()
+        m.size = N
+        m.group = group
+        m.next = nxt
+        m.offset = offset
+        m.mass = mass
         m.slip0 = np.zeros(N)
         m.exit_t = np.full(N, np.nan)
         m.start_t = np.zeros(N)
@@ -527,9 +577,10 @@ class FeederSimulator:
                 raise ParameterError(
                     f"t_end_s={t_end_s!r} equals the simulator time: nothing to sample"
                 )
-            if not np.all(np.isfinite(samples)):
+            problem = _k.check_samples(samples)  # one pass, no temporaries
+            if problem == 1:
                 raise ParameterError("sample_times_s contains non-finite values")
-            if np.any(np.diff(samples) < 0.0):
+            if problem == 2:
                 raise ParameterError("sample_times_s must be sorted")
             if samples[0] < self.time_s or samples[-1] > t_end:
                 raise ParameterError(
@@ -754,18 +805,14 @@ class FeederSimulator:
     def _totals(self) -> dict[str, F64]:
         m, g = self._m, self._g
         N = m.size
-        end_t = np.full(N, self.time_s)
-        end_x = np.empty(N)
-        slip = np.empty(N)
-        for i in range(N):
-            gi = int(m.group[i])
-            if gi >= 0:
-                end_x[i] = m.offset[i] + g.y[gi] + self._state[_k.S_X]
-                slip[i] = g.slip[gi] - m.slip0[i]
-            else:
-                end_t[i] = m.exit_t[i]
-                end_x[i] = m.offset[i]
-                slip[i] = m.slip0[i]
+        gi = m.group[:N]
+        on = gi >= 0
+        gon = gi[on]
+        end_t = np.where(on, self.time_s, m.exit_t[:N])
+        end_x = m.offset[:N].copy()
+        end_x[on] = end_x[on] + g.y[gon] + self._state[_k.S_X]
+        slip = m.slip0[:N].copy()
+        slip[on] = g.slip[gon] - slip[on]
         return {
             "part_start_t_s": m.start_t[:N].copy(),
             "part_start_x_m": m.start_x[:N].copy(),
@@ -930,7 +977,9 @@ def _sample_times(duration_s: float, output_rate_hz: float) -> F64:
     duration = _finite("duration_s", duration_s, positive=True)
     rate = _finite("output_rate_hz", output_rate_hz, positive=True)
     n = math.floor(duration * rate * (1.0 + 1e-12))
-    return np.arange(n + 1, dtype=np.float64) / rate
+    samples = np.arange(n + 1, dtype=np.float64)
+    samples /= rate  # in place: the same values as arange / rate, one array less
+    return samples
 
 
 def simulate(
