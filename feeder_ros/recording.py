@@ -254,6 +254,12 @@ def record(
                     summary.stopped_by = "signal"
             except (KeyboardInterrupt, ExternalShutdownException):
                 summary.stopped_by = "signal"
+            except RuntimeError:
+                # rclpy can fail to take a message that arrived while the signal shut the
+                # context down: that is the stop we were asked for, anything else is an error
+                if context.ok():
+                    raise
+                summary.stopped_by = "signal"
             finally:
                 executor.remove_node(node)
                 node.destroy_node()

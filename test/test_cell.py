@@ -158,9 +158,12 @@ def test_cell_runs_feeders_side_by_side_and_leaves_no_orphans(tmp_path: Path, ho
                 )
 
             assert wait_until(all_up, 30.0), node.get_node_names_and_namespaces()
-            topics = dict(node.get_topic_names_and_types())
-            assert "/side/feeder_a/drive/command" in topics
-            assert "/side/feeder_b/imu" in topics
+
+            def topics_up() -> bool:  # a node shows up before its publishers are discovered
+                topics = dict(node.get_topic_names_and_types())
+                return "/side/feeder_a/drive/command" in topics and "/side/feeder_b/imu" in topics
+
+            assert wait_until(topics_up, 15.0), node.get_topic_names_and_types()
         children = _children(process.pid)
         assert len(children) == 4
         if how == "ctrl-c":

@@ -137,8 +137,13 @@ def run_composed(cell: CellDescription, parameters_file: Path, duration: float |
         for executable in {launch.executable for launch in cell.nodes}
     }
     try:
-        with rclpy.init():
-            _spin_composed(cell, classes, parameters_file, duration)
+        with rclpy.init() as init:
+            try:
+                _spin_composed(cell, classes, parameters_file, duration)
+            except RuntimeError:
+                # a message taken while Ctrl-C shut the context down: the stop we asked for
+                if init.context.ok():
+                    raise
     except (KeyboardInterrupt, ExternalShutdownException):
         # rclpy's handler shuts the context down, then chains to Python's (KeyboardInterrupt),
         # which can land anywhere in the shutdown: the cell is stopping either way
