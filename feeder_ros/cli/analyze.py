@@ -13,6 +13,7 @@ import sys
 from pathlib import Path
 
 from feeder_ros.cli.main import CommandError
+from feeder_ros.cli.progress import ProgressBar
 
 __all__ = ["HELP", "add_arguments", "run"]
 
@@ -46,28 +47,22 @@ def add_arguments(parser: argparse.ArgumentParser) -> None:
     )
 
 
-class _Bar:
+class _BagProgress:
+    """Per-bag progress: one bar line per bag (the analysis reports ``(bag index, fraction)``)."""
+
     def __init__(self, names: list[str], enabled: bool) -> None:
         self.names = names
-        self.enabled = enabled
-        self.last: tuple[int, int] | None = None
+        self.bar = ProgressBar(names[0] if names else "", 1.0, enabled)
+        self.bag = 0
 
     def __call__(self, bag: int, fraction: float) -> None:
-        if not self.enabled:
-            return
-        percent = int(100 * min(max(fraction, 0.0), 1.0))
-        if self.last == (bag, percent):
-            return
-        if self.last is not None and self.last[0] != bag:
-            sys.stderr.write("\n")
-        self.last = (bag, percent)
-        sys.stderr.write(f"\r{self.names[bag]} [{'#' * (percent // 4):<25}] {percent:3d}%")
-        sys.stderr.flush()
+        if bag != self.bag:
+            self.bag = bag
+            self.bar.relabel(self.names[bag])
+        self.bar.update(fraction)
 
     def close(self) -> None:
-        if self.enabled and self.last is not None:
-            sys.stderr.write("\n")
-            sys.stderr.flush()
+        self.bar.close()
 
 
 def run(args: argparse.Namespace) -> int:
@@ -77,7 +72,7 @@ def run(args: argparse.Namespace) -> int:
     if args.output is not None and args.output.exists() and not args.output.is_dir():
         raise CommandError(f"--output {args.output}: exists and is not a directory")
     show = bool(args.progress) or sys.stderr.isatty()
-    bar = _Bar([str(p) for p in args.bags], show)
+    bar = _BagProgress([str(p) for p in args.bags], show)
     try:
         analyses = analyze_bags(args.bags, min_segment_s=args.min_segment, progress=bar)
     finally:

@@ -26,6 +26,7 @@ import numpy as np
 import yaml
 
 from feeder_ros.cli.main import CommandError
+from feeder_ros.cli.progress import ProgressBar
 from feeder_ros.nodes.platform_simulator_parameters import NODE_PARAMETERS
 from feeder_ros.physics.parameters import FeederParameters, ParameterError, parse_parameter_value
 
@@ -246,37 +247,12 @@ def default_parts(params: FeederParameters, count: int) -> tuple[PartSpec, ...]:
     return tuple(PartSpec(position_m=i * spacing) for i in range(count))
 
 
-class _Progress:
-    """A one-line progress bar on stderr."""
-
-    def __init__(self, total: float, enabled: bool) -> None:
-        self.total = total
-        self.enabled = enabled
-        self._last = -1
-
-    def update(self, done: float) -> None:
-        if not self.enabled:
-            return
-        percent = int(100.0 * min(done / self.total, 1.0)) if self.total > 0 else 100
-        if percent == self._last:
-            return
-        self._last = percent
-        bar = "#" * (percent // 4)
-        sys.stderr.write(f"\rsimulating [{bar:<25}] {percent:3d}%")
-        sys.stderr.flush()
-
-    def close(self) -> None:
-        if self.enabled and self._last >= 0:
-            sys.stderr.write("\n")
-            sys.stderr.flush()
-
-
 def simulate_with_progress(
     params: FeederParameters,
     duration_s: float,
     rate_hz: float,
     parts: tuple[PartSpec, ...],
-    progress: _Progress,
+    progress: ProgressBar,
 ) -> SimulationResult:
     """``simulate``, in chunks of the exact simulator when a progress bar is shown.
 
@@ -336,7 +312,7 @@ def run(args: argparse.Namespace) -> int:
     params = load_parameters(Path(config), args.overrides, args.preset)
     parts = default_parts(params, args.parts)
     show = bool(args.progress) or (sys.stderr.isatty() and args.duration >= 10.0)
-    progress = _Progress(args.duration, show)
+    progress = ProgressBar("simulating", args.duration, show)
     warmup = _warm_up(params)
     started = time.perf_counter()
     try:

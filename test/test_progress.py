@@ -1,0 +1,37 @@
+"""The shared progress bar: redraws on percentage changes only, one line per item."""
+
+from __future__ import annotations
+
+import io
+
+from feeder_ros.cli.progress import ProgressBar
+
+
+def test_bar_draws_each_percentage_once_and_ends_the_line() -> None:
+    out = io.StringIO()
+    bar = ProgressBar("sweep", 200, True, stream=out)
+    for done in (0, 1, 2, 100, 100.4, 200, 250):
+        bar.update(done)
+    bar.close()
+    frames = out.getvalue().split("\r")[1:]
+    assert [f.rstrip("\n").split()[-1] for f in frames] == ["0%", "1%", "50%", "100%"]
+    assert frames[2].startswith("sweep [" + "#" * 12 + " " * 13 + "]")
+    assert out.getvalue().endswith("100%\n")
+
+
+def test_relabel_starts_a_new_line_and_disabled_bar_writes_nothing() -> None:
+    out = io.StringIO()
+    bar = ProgressBar("a.mcap", 1.0, True, stream=out)
+    bar.update(1.0)
+    bar.relabel("b.mcap")
+    bar.update(0.5)
+    bar.close()
+    assert (
+        out.getvalue()
+        == "\ra.mcap [" + "#" * 25 + "] 100%\n\rb.mcap [" + "#" * 12 + " " * 13 + "]  50%\n"
+    )
+    quiet = io.StringIO()
+    off = ProgressBar("x", 1.0, False, stream=quiet)
+    off.update(0.5)
+    off.close()
+    assert quiet.getvalue() == ""
