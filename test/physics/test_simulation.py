@@ -131,6 +131,30 @@ def test_simulate_many_agrees_with_single_runs() -> None:
     assert summary.slip_fraction[2] == 0.0
 
 
+def test_simulate_many_measures_a_window_after_settling() -> None:
+    """settle_s: speed and slip fraction over [settle, settle + duration], read off one run's
+    exact part position at both ends; a part gone before the window has no speed."""
+    point = FeederParameters(drive_amplitude_n=40.0, drive_frequency_hz=29.6, damping_ns_per_m=10.0)
+    summary = simulate_many([point], 1.5, settle_s=0.5)
+    run = simulate(point, 2.0, 4.0)  # samples every 0.25 s: t = 0.5 is row 2, t = 2.0 row 8
+    assert run.t_s[2] == 0.5
+    assert run.t_s[8] == 2.0
+    window_speed = (run.part_x_m[8, 0] - run.part_x_m[2, 0]) / 1.5
+    assert summary.mean_part_speed_mps[0] == pytest.approx(window_speed, rel=1e-9)
+    slip_phases = (run.part_phase[:, 0] != 0).any()
+    assert slip_phases
+    assert 0.0 < summary.slip_fraction[0] <= 1.0
+    from_rest = simulate_many([point], 2.0).mean_part_speed_mps[0]
+    assert abs(from_rest - window_speed) > 1e-6  # the transient counts without settle_s
+
+    short = point.with_changes(drive_frequency_hz=10.0, drive_amplitude_n=20.0, track_length_m=1e-3)
+    gone = simulate_many([short], 1.0, settle_s=0.5)  # forward ~6 mm/s: out within 0.5 s
+    assert np.isnan(gone.mean_part_speed_mps[0])
+    assert np.isfinite(gone.exit_t_s[0])
+    with pytest.raises(ParameterError, match=r"settle_s=-1\.0"):
+        simulate_many([point], 1.0, settle_s=-1.0)
+
+
 def test_carrier_only_and_parts_helpers(case_study: FeederParameters) -> None:
     heavy = case_study.with_changes(part_mass_kg=2.0)
     carrier = simulate_carrier(heavy, 0.2, 1000.0)
