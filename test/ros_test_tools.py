@@ -15,7 +15,7 @@ from typing import Any
 
 import rclpy
 from rclpy.context import Context
-from rclpy.executors import MultiThreadedExecutor
+from rclpy.executors import SingleThreadedExecutor
 from rclpy.node import Node
 
 REPO = Path(__file__).resolve().parents[1]
@@ -69,7 +69,7 @@ def probe_node(name: str = "feeder_test_probe") -> Iterator[Node]:
     context = Context()
     rclpy.init(context=context)
     node = rclpy.create_node(name, context=context)
-    executor = MultiThreadedExecutor(num_threads=2, context=context)
+    executor = SingleThreadedExecutor(context=context)
     executor.add_node(node)
     thread = threading.Thread(target=executor.spin, daemon=True)
     thread.start()

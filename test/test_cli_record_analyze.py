@@ -51,6 +51,9 @@ def simulator(ns: str) -> Iterator[subprocess.Popen[str]]:
         SIMULATOR, "--ros-args", "-r", f"__ns:={ns}",
         "-p", "state_rate_hz:=250.0", "-p", "imu_rate_hz:=250.0", "-p", "parts_rate_hz:=50.0",
         "-p", "damping_ns_per_m:=30.0",
+        # no command watchdog: these tests are about recording, and on a loaded machine a
+        # command may reach the simulator late (the watchdog has its own simulator test)
+        "-p", "command_timeout_s:=0.0",
     ]  # fmt: skip
     with running(command) as process:
         yield process
@@ -58,8 +61,8 @@ def simulator(ns: str) -> Iterator[subprocess.Popen[str]]:
 
 
 def drive(node: Node, ns: str, frequency_hz: float, amplitude_n: float) -> Any:
-    """Publish the drive command now (the simulator treats a command older than its timeout as a
-    stop, so the caller repeats it)."""
+    """A callback publishing the drive command, stamped now (a timer repeats it until the
+    simulator has been discovered)."""
     publisher = node.create_publisher(DriveCommand, f"{ns}/drive/command", 10)
 
     def send() -> None:
@@ -171,13 +174,17 @@ def test_record_a_simulator_and_read_the_bag_back(tmp_path: Path) -> None:
 def test_duration_topic_list_and_sigterm(tmp_path: Path) -> None:
     ns = "/rec_cli_term"
     with simulator(ns):
+        with probe_node() as node:  # the simulator publishes before the recorder's clock starts
+            seen: list[CarrierState] = []
+            node.create_subscription(CarrierState, f"{ns}/carrier/state", seen.append, RELIABLE)
+            assert wait_until(lambda: len(seen) > 10, 30)
         short = subprocess.run(
-            [FEEDER, "record", "carrier/state", "--namespace", ns, "--duration", "2.5",
+            [FEEDER, "record", "carrier/state", "--namespace", ns, "--duration", "6",
              "--max-bag-duration", "0.5", "--compression", "lz4", "-o", str(tmp_path / "short")],
             capture_output=True, text=True, timeout=60,
         )  # fmt: skip
         assert short.returncode == 0, short.stderr
-        assert "stopped by --duration 2.5 s" in short.stdout
+        assert "stopped by --duration 6 s" in short.stdout
         info = bag_info(tmp_path / "short")
         assert list(info.topics) == [f"{ns}/carrier/state"]
         assert info.message_count > 100
@@ -193,8 +200,9 @@ def test_duration_topic_list_and_sigterm(tmp_path: Path) -> None:
             stdout=subprocess.PIPE, stderr=subprocess.PIPE, text=True,
         )  # fmt: skip
         try:
-            assert wait_until(lambda: (tmp_path / "term" / "metadata.yaml").exists(), 20)
-            time.sleep(2.0)
+            mcap = tmp_path / "term" / "term_0.mcap"  # recording (discovery may take seconds)
+            assert wait_until(lambda: mcap.exists() and mcap.stat().st_size > 100_000, 30)
+            time.sleep(0.5)
         finally:
             process.send_signal(signal.SIGTERM)
             stdout, _ = process.communicate(timeout=20)

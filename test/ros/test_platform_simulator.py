@@ -47,10 +47,13 @@ def test_drive_command_makes_the_carrier_vibrate_at_the_drive_frequency() -> Non
 
         assert wait_until(lambda: len(imu) > 50, 20.0), process.poll()
 
+        sent: list[int] = []  # command stamps [ns]
+
         def command() -> None:
             message = DriveCommand(enabled=True, frequency_hz=31.0, amplitude_n=40.0)
             message.header.stamp = node.get_clock().now().to_msg()
             publisher.publish(message)
+            sent.append(Time.from_msg(message.header.stamp).nanoseconds)
 
         def driven() -> bool:
             command()
@@ -65,14 +68,23 @@ def test_drive_command_makes_the_carrier_vibrate_at_the_drive_frequency() -> Non
         steps = np.diff(stamps)
         assert np.all(steps > 0), "IMU stamps not strictly increasing"
         assert np.all(steps % 2_000_000 == 0), "IMU samples off the 500 Hz grid"
-        # best effort: a busy probe may drop some, but what arrives is on the grid
-        assert (steps == 2_000_000).mean() > 0.95, "too many IMU samples lost on loopback"
+        # best effort: a busy probe may drop some (the reliable state stream below may not), but
+        # what arrives is on the grid; the spectrum is taken over the longest gapless stretch
+        on = next(s for s in states if s.drive_amplitude_n == 40.0)  # the drive took effect
+        driven_from = Time.from_msg(on.header.stamp).nanoseconds + 200_000_000
+        samples = [m for m in imu if Time.from_msg(m.header.stamp).nanoseconds >= driven_from]
+        gaps = np.diff([Time.from_msg(m.header.stamp).nanoseconds for m in samples])
+        breaks = np.flatnonzero(gaps != 2_000_000)
+        edges = np.concatenate(([-1], breaks, [gaps.size]))
+        longest = int(np.argmax(np.diff(edges)))
+        first, stop = edges[longest] + 1, edges[longest + 1] + 1
+        stretch = [m.linear_acceleration.x for m in samples[first:stop]][-1000:]
+        assert len(stretch) >= 500, f"no gapless second of IMU samples (breaks at {breaks})"
         state_stamps = np.array([Time.from_msg(m.header.stamp).nanoseconds for m in states])
         assert np.all(np.diff(state_stamps) == 4_000_000), "state samples skipped or duplicated"
 
-        x = np.array([m.linear_acceleration.x for m in imu[-1000:]])
+        x = np.array(stretch)
         assert np.ptp(x) > 1.0, "carrier does not respond to the drive"
-        assert np.all(np.diff(stamps[-1000:]) == 2_000_000), "the spectrum needs a gapless window"
         spectrum = np.abs(np.fft.rfft(x - x.mean()))
         peak_hz = np.fft.rfftfreq(x.size, 2e-3)[np.argmax(spectrum)]
         assert abs(peak_hz - 31.0) <= 1.0, peak_hz
@@ -85,11 +97,20 @@ def test_drive_command_makes_the_carrier_vibrate_at_the_drive_frequency() -> Non
         branches = {s.stiffness_branch for s in states[-500:]}
         assert branches == {1, -1}, "the carrier should switch stiffness every cycle"
 
-        # commands stop: after command_timeout_s the drive is treated as stopped
-        deadline = time.monotonic() + 4.0
-        while time.monotonic() < deadline and states[-1].drive_amplitude_n != 0.0:
-            time.sleep(0.05)
-        assert states[-1].drive_amplitude_n == 0.0, "stale command was not treated as stop"
+        # commands stop: a command older than command_timeout_s (1 s, on the simulation clock,
+        # whose stamps are the states') is a stop. Judged by stamps, not by the wall clock: on a
+        # loaded machine the simulation may run behind the wall clock.
+        last = sent[-1]
+
+        def stamp(m: CarrierState) -> int:
+            return int(Time.from_msg(m.header.stamp).nanoseconds)
+
+        assert wait_until(lambda: stamp(states[-1]) > last + 1_500_000_000, 30.0), "no progress"
+        before = [s.drive_amplitude_n for s in states if stamp(s) <= last]
+        after = [s.drive_amplitude_n for s in states if stamp(s) > last + 1_250_000_000]
+        assert before[-1] == 40.0, "driven up to the last command"
+        assert after, "no states after the timeout"
+        assert set(after) == {0.0}, "stale command was not treated as stop"
     assert process.returncode == 0
 
 
