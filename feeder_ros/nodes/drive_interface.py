@@ -9,6 +9,15 @@ parameters, messages, service calls and lifecycle transitions into calls on it, 
 Backends: ``sim`` publishes ``drive/command`` (freshly stamped, ``publish_rate_hz``, enabled=false
 when off) for the platform simulator; ``modbus_tcp`` talks to a real feeder controller
 (register map in ``config/drive_interface.yaml``).
+
+Resonance tracking (``tracking.enabled``): in target-speed mode, while running, a
+:class:`feeder_ros.drive.resonance_tracker.ResonanceTracker` starts from the speed model's set point
+and moves the frequency onto the measured part-speed peak (square frequency dither, extremum
+seeking) while trimming the amplitude to hold the target speed, from the part speed on
+``tracking.feedback_topic`` (the estimator's ``estimate`` or the speed monitor's ``speed/status``).
+Its set points go through the same limits and ramps as any other (:meth:`DriveController.set_drive`,
+with target-speed mode kept). Stale feedback holds the tracked centre frequency and amplitude and
+is reported in ``/diagnostics`` (WARN) and ``drive/state`` (``status`` = TRACKING_HOLD).
 """
 
 from __future__ import annotations
@@ -20,19 +29,29 @@ from typing import Any
 
 from diagnostic_msgs.msg import DiagnosticArray, DiagnosticStatus, KeyValue
 from rclpy.duration import Duration
+from rclpy.exceptions import InvalidTopicNameException
+from rclpy.expand_topic_name import expand_topic_name
 from rclpy.lifecycle import LifecycleNode, LifecycleState, TransitionCallbackReturn
 from rclpy.parameter import Parameter
 from rclpy.qos import QoSProfile, ReliabilityPolicy
 from rclpy.time import Time
+from rclpy.validate_full_topic_name import validate_full_topic_name
 from std_msgs.msg import Header
 from std_srvs.srv import Trigger
 
 from feeder_ros.drive.backend import BackendStatus, DriveBackend, DriveOutput, SimBackend
 from feeder_ros.drive.controller import DriveController, DriveState
-from feeder_ros.drive.limits import DriveLimits, parse_bands
+from feeder_ros.drive.limits import DriveLimits, Outcome, parse_bands
 from feeder_ros.drive.modbus import ModbusSettings, ModbusTcpBackend, RegisterMap
+from feeder_ros.drive.resonance_tracker import (
+    ResonanceTracker,
+    TrackerCommand,
+    TrackerMode,
+    TrackerSettings,
+    TrackerStatus,
+)
 from feeder_ros.drive.speed_model import SpeedModel, cached_speed_table, default_cache_dir
-from feeder_ros.msg import DriveCommand
+from feeder_ros.msg import DriveCommand, SpeedStatus, VehicleEstimate
 from feeder_ros.msg import DriveState as DriveStateMsg
 from feeder_ros.node_interfaces import NodeInterface, ServiceSpec, TopicSpec
 from feeder_ros.nodes.ros_parameters import declare_parameters, validator
@@ -232,6 +251,118 @@ NODE_PARAMETERS = (
     ParameterSpec("modbus.status_running_bit", int, "1", "status word bit: running", 0, 15),
     ParameterSpec("modbus.status_alarm_bit", int, "1", "status word bit: alarm", 0, 15),
 )
+_TRACKING = "resonance tracking: "
+TRACKING_PARAMETERS = (
+    ParameterSpec(
+        "tracking.enabled",
+        bool,
+        "",
+        _TRACKING + "in target-speed mode, keep the frequency on the measured part-speed peak "
+        "and trim the amplitude to the target speed (applies at once)",
+    ),
+    ParameterSpec(
+        "tracking.feedback_topic",
+        str,
+        "",
+        _TRACKING + "part-speed feedback topic (relative: the feeder's namespace)" + _AT_CONFIGURE,
+    ),
+    ParameterSpec(
+        "tracking.feedback_type",
+        str,
+        "",
+        _TRACKING + "its type: feeder_ros/VehicleEstimate (mean_speed_mps, confidence-gated) or "
+        "feeder_ros/SpeedStatus (estimated_speed_mps)" + _AT_CONFIGURE,
+        choices=("vehicle_estimate", "speed_status"),
+    ),
+    ParameterSpec(
+        "tracking.min_confidence",
+        float,
+        "1",
+        _TRACKING + "VehicleEstimate readings below this mean_speed_confidence are ignored",
+        0.0,
+        1.0,
+    ),
+    ParameterSpec(
+        "tracking.feedback_timeout_s",
+        float,
+        "s",
+        _TRACKING + "no valid speed reading this long (by its stamp): hold the centre frequency "
+        "and amplitude, WARN",
+        0.0,
+        600.0,
+        exclusive_minimum=True,
+    ),
+    ParameterSpec(
+        "tracking.dither_hz",
+        float,
+        "Hz",
+        _TRACKING + "frequency offset of each half-period from the centre",
+        0.0,
+        100.0,
+        exclusive_minimum=True,
+    ),
+    ParameterSpec(
+        "tracking.dither_period_s",
+        float,
+        "s",
+        _TRACKING + "one dither cycle (a half-period on each side); centre and amplitude move "
+        "once per cycle",
+        0.0,
+        3600.0,
+        exclusive_minimum=True,
+    ),
+    ParameterSpec(
+        "tracking.settle_s",
+        float,
+        "s",
+        _TRACKING + "discarded at the start of each half-period (drive transient, speed source "
+        "settling); < dither_period_s/2",
+        0.0,
+        1800.0,
+    ),
+    ParameterSpec(
+        "tracking.gain_hz2",
+        float,
+        "Hz^2",
+        _TRACKING + "centre step per unit relative speed gradient, (dv/df)/target in 1/Hz",
+        0.0,
+        1000.0,
+    ),
+    ParameterSpec(
+        "tracking.max_step_hz",
+        float,
+        "Hz",
+        _TRACKING + "largest centre frequency step per cycle",
+        0.0,
+        100.0,
+        exclusive_minimum=True,
+    ),
+    ParameterSpec(
+        "tracking.amplitude_kp_percent",
+        float,
+        "%",
+        _TRACKING + "amplitude trim, proportional: % per unit change of the relative speed error",
+        0.0,
+        1000.0,
+    ),
+    ParameterSpec(
+        "tracking.amplitude_ki_percent",
+        float,
+        "%",
+        _TRACKING + "amplitude trim, integral: % per cycle per unit relative speed error",
+        0.0,
+        1000.0,
+    ),
+    ParameterSpec(
+        "tracking.max_amplitude_step_percent",
+        float,
+        "%",
+        _TRACKING + "largest amplitude change per cycle",
+        0.0,
+        100.0,
+        exclusive_minimum=True,
+    ),
+)
 PLANT_PARAMETERS = tuple(
     replace(
         spec,
@@ -243,10 +374,23 @@ PLANT_PARAMETERS = tuple(
     if spec.name not in _PLANT_EXCLUDED
 )
 PARAMETERS: dict[str, ParameterSpec] = {
-    spec.name: spec for spec in (*LIMIT_PARAMETERS, *NODE_PARAMETERS, *PLANT_PARAMETERS)
+    spec.name: spec
+    for spec in (*LIMIT_PARAMETERS, *NODE_PARAMETERS, *TRACKING_PARAMETERS, *PLANT_PARAMETERS)
 }
 _MAP = RegisterMap()
 _MODBUS = ModbusSettings()
+_TRACKER = TrackerSettings()
+_TRACKER_FIELDS = (
+    "dither_hz",
+    "dither_period_s",
+    "settle_s",
+    "gain_hz2",
+    "max_step_hz",
+    "amplitude_kp_percent",
+    "amplitude_ki_percent",
+    "max_amplitude_step_percent",
+    "feedback_timeout_s",
+)
 DEFAULTS: dict[str, Any] = {
     "min_frequency_hz": 5.0,
     "max_frequency_hz": 300.0,
@@ -292,6 +436,11 @@ DEFAULTS: dict[str, Any] = {
     "modbus.scale.ramp_time_counts_per_s": _MAP.ramp_time_counts_per_s,
     "modbus.status_running_bit": _MAP.status_running_bit,
     "modbus.status_alarm_bit": _MAP.status_alarm_bit,
+    "tracking.enabled": False,
+    "tracking.feedback_topic": "estimate",
+    "tracking.feedback_type": "vehicle_estimate",
+    "tracking.min_confidence": 0.5,
+    **{f"tracking.{name}": getattr(_TRACKER, name) for name in _TRACKER_FIELDS},
     **{
         _PLANT_PREFIX + name: value
         for name, value in FeederParameters().as_dict().items()
@@ -311,8 +460,9 @@ INTERFACE = NodeInterface(
             "drive/state",
             "feeder_ros/msg/DriveState",
             "reliable, depth 10",
-            "state (idle/ramping/running/fault/e-stop), output, set point, fault reason; "
-            "at publish_rate_hz once configured",
+            "state (idle/ramping/running/fault/e-stop), output, set point, fault reason, "
+            "resonance tracking (off/active/hold, tracked peak); at publish_rate_hz once "
+            "configured",
         ),
         TopicSpec(
             "drive/command",
@@ -324,7 +474,8 @@ INTERFACE = NodeInterface(
             "/diagnostics",
             "diagnostic_msgs/msg/DiagnosticArray",
             "reliable, depth 10",
-            "OK/WARN/ERROR with state, output, heartbeat age and backend link details",
+            "OK/WARN/ERROR with state, output, heartbeat age and backend link details, "
+            "resonance tracking (WARN while it holds on stale feedback)",
         ),
     ),
     subscribes=(
@@ -333,6 +484,14 @@ INTERFACE = NodeInterface(
             "std_msgs/msg/Header",
             "reliable, depth 10",
             "the cell controller's heartbeat; none for heartbeat_timeout_s: ramp to zero, fault",
+        ),
+        TopicSpec(
+            "estimate",
+            "feeder_ros/msg/VehicleEstimate",
+            "reliable, depth 100",
+            "resonance tracking's part-speed feedback: tracking.feedback_topic of "
+            "tracking.feedback_type (or e.g. speed/status, feeder_ros/msg/SpeedStatus); "
+            "subscribed at configure",
         ),
     ),
     services=(
@@ -416,9 +575,23 @@ def plant_from(values: dict[str, Any]) -> FeederParameters:
     )
 
 
+def tracker_settings_from(values: dict[str, Any]) -> TrackerSettings:
+    return TrackerSettings(**{name: values[f"tracking.{name}"] for name in _TRACKER_FIELDS})
+
+
+def check_topic_name(name: str, parameter: str) -> None:
+    """Raise ValueError naming ``parameter`` unless ``name`` is a valid ROS topic name."""
+    try:
+        validate_full_topic_name(expand_topic_name(name, INTERFACE.node_name, "/"))
+    except (ValueError, InvalidTopicNameException) as error:
+        raise ValueError(f"{parameter}={name!r} is not a topic name: {error}") from None
+
+
 def check_combination(values: dict[str, Any]) -> None:
     """Every combination the node could be configured with; raises with the offending values."""
-    limits_from(values)
+    limits = limits_from(values)
+    tracker_settings_from(values).check_against(limits)
+    check_topic_name(values["tracking.feedback_topic"], "tracking.feedback_topic")
     register_map_from(values)
     plant_from(values)
     if values["modbus.reconnect_min_s"] > values["modbus.reconnect_max_s"]:
@@ -429,6 +602,12 @@ def check_combination(values: dict[str, Any]) -> None:
 
 
 _STATE_NAMES = {state: state.name.lower() for state in DriveState}
+_TRACKING_NAMES = {mode: mode.name.lower() for mode in TrackerMode}
+FEEDBACK_QOS = QoSProfile(depth=100, reliability=ReliabilityPolicy.RELIABLE)
+
+
+def _stamp_s(stamp: Any) -> float:
+    return float(stamp.sec) + float(stamp.nanosec) * 1e-9
 
 
 class DriveInterface(LifecycleNode):
@@ -447,6 +626,11 @@ class DriveInterface(LifecycleNode):
         self._speed_source = "none"
         self._command_pub: Any = None
         self._loop_timers: list[Any] = []
+        self._tracker: ResonanceTracker | None = None
+        self._feedback_sub: Any = None
+        self._tracking_note = "not configured"  # why tracking is not active
+        self._tracking_refused: tuple[float, float, float] | None = None  # start point refused
+        self._tracking_mode = TrackerMode.OFF  # as last logged
         self._last_output = DriveOutput(False, 0.0, 0.0, 0.0)
         # plain publishers: they exist unconfigured, and keep publishing the ramp to zero after
         # deactivate (lifecycle publishers would fall silent at once)
@@ -482,6 +666,21 @@ class DriveInterface(LifecycleNode):
             controller.watchdog.timeout_s = float(self._values["heartbeat_timeout_s"])
         if "unreachable_speed" in changed:
             controller.clamp_unreachable_speed = self._values["unreachable_speed"] == "clamp"
+        tracker = self._tracker
+        if tracker is None:
+            return
+        now = self._now()
+        self._tracking_refused = None  # new settings or limits: a refused start may work now
+        if changed & {f"tracking.{name}" for name in _TRACKER_FIELDS}:
+            command = tracker.update_settings(tracker_settings_from(self._values), now)
+            if command is not None:
+                self._apply_tracker(controller, now, command)
+        if changed & {spec.name for spec in LIMIT_PARAMETERS}:
+            command = tracker.update_limits(limits_from(self._values), now)
+            if command is not None:
+                self._apply_tracker(controller, now, command)
+        if "tracking.enabled" in changed and not self._values["tracking.enabled"]:
+            self._stop_tracker(controller, now, "tracking.enabled is false", hold=True)
 
     # -- lifecycle -----------------------------------------------------------------------------
     def on_configure(self, state: LifecycleState) -> TransitionCallbackReturn:
@@ -507,12 +706,26 @@ class DriveInterface(LifecycleNode):
             )
         self._backend_fault = ""
         self._backend.connect()
+        self._tracker = ResonanceTracker(tracker_settings_from(values), limits)
+        self._tracking_refused = None
+        self._tracking_note = "waiting for target-speed mode"
+        if values["tracking.feedback_type"] == "vehicle_estimate":
+            self._feedback_sub = self.create_subscription(
+                VehicleEstimate, values["tracking.feedback_topic"], self._on_estimate, FEEDBACK_QOS
+            )
+        else:
+            self._feedback_sub = self.create_subscription(
+                SpeedStatus, values["tracking.feedback_topic"], self._on_speed_status, FEEDBACK_QOS
+            )
         self._period_s = 1.0 / values["publish_rate_hz"]
         self._loop_timers = [self.create_timer(self._period_s, self._tick)]
         self.get_logger().info(
             f"configured: backend {values['backend']}, {limits.min_frequency_hz:g}-"
             f"{limits.max_frequency_hz:g} Hz, 0-{limits.max_amplitude_percent:g} %, "
-            f"speed model: {self._speed_source}"
+            f"speed model: {self._speed_source}; resonance tracking "
+            f"{'on' if values['tracking.enabled'] else 'off'}, feedback "
+            f"{self.resolve_topic_name(values['tracking.feedback_topic'])} "
+            f"({values['tracking.feedback_type']})"
         )
         return TransitionCallbackReturn.SUCCESS
 
@@ -563,6 +776,12 @@ class DriveInterface(LifecycleNode):
         for timer in self._loop_timers:
             self.destroy_timer(timer)
         self._loop_timers = []
+        self._tracker = None
+        self._tracking_note = "not configured"
+        self._tracking_mode = TrackerMode.OFF
+        if self._feedback_sub is not None:
+            self.destroy_subscription(self._feedback_sub)
+            self._feedback_sub = None
         if self._controller is not None:
             self._controller.emergency_stop(self._now(), "shutting down")
             self._controller = None
@@ -614,6 +833,7 @@ class DriveInterface(LifecycleNode):
                 self.get_logger().debug(f"backend fault: {status.fault}")
             else:
                 self.get_logger().info("backend fault cleared (reset_fault to resume)")
+        self._run_tracker(controller, now)
         output = controller.tick(now, self._period_s)
         backend.write(output)
         self._last_output = output
@@ -632,7 +852,123 @@ class DriveInterface(LifecycleNode):
         message.target_speed_mps = controller.target_speed_mps if controller.speed_mode else 0.0
         message.backend = self._values["backend"]
         message.fault_reason = controller.fault_reason
+        if self._tracker is not None:
+            tracking = self._tracker.status(self._now())
+            message.status = int(tracking.mode)
+            message.tracked_frequency_hz = tracking.centre_frequency_hz
+            message.tracked_amplitude_percent = tracking.amplitude_percent
+            message.measured_speed_mps = tracking.measured_speed_mps
+        else:
+            message.status = int(TrackerMode.OFF)
+            message.tracked_frequency_hz = math.nan
+            message.tracked_amplitude_percent = math.nan
+            message.measured_speed_mps = math.nan
         self._state_pub.publish(message)
+
+    # -- resonance tracking --------------------------------------------------------------------
+    def _tracking_blocker(self, controller: DriveController) -> str:
+        """Why tracking may not run now ("" when it may)."""
+        if not self._values["tracking.enabled"]:
+            return "tracking.enabled is false"
+        if not controller.active:
+            return "drive interface not active"
+        if controller.fault_reason:
+            return f"latched: {controller.fault_reason}"
+        if not controller.speed_mode:
+            return "not in target-speed mode (set_target_speed)"
+        if not controller.running:
+            return "not running (start)"
+        return ""
+
+    def _run_tracker(self, controller: DriveController, now: float) -> None:
+        tracker = self._tracker
+        if tracker is None:
+            return
+        blocker = self._tracking_blocker(controller)
+        if blocker:
+            # stopped or faulted in target-speed mode: the tracked point becomes the stored set
+            # point (a later start resumes from the peak); set_drive left speed mode: no hold
+            self._stop_tracker(controller, now, blocker, hold=controller.speed_mode)
+            self._tracking_note = blocker
+            return
+        command: TrackerCommand | None
+        if tracker.mode is TrackerMode.OFF:
+            point = controller.set_point
+            start = (point.frequency_hz, point.amplitude_percent, controller.target_speed_mps)
+            if start == self._tracking_refused:
+                return
+            command = tracker.start(now, *start, ready_s=now + controller.ramp.remaining_s(now))
+            if command is None:
+                self._tracking_refused = start
+                self._tracking_note = tracker.status(now).reason
+                self.get_logger().warn(f"resonance tracking cannot start: {self._tracking_note}")
+                return
+            self._tracking_refused = None
+            self._tracking_note = ""
+            self.get_logger().info(
+                f"resonance tracking started at {point.frequency_hz:.3f} Hz, "
+                f"{point.amplitude_percent:.2f} % for {controller.target_speed_mps:g} m/s"
+            )
+        else:
+            command = tracker.update(now)
+        if command is not None:
+            self._apply_tracker(controller, now, command)
+        self._log_tracking_mode(now)
+
+    def _stop_tracker(
+        self, controller: DriveController, now: float, reason: str, hold: bool
+    ) -> None:
+        tracker = self._tracker
+        if tracker is None:
+            return
+        command = tracker.stop(reason)
+        if command is not None:
+            self.get_logger().info(
+                f"resonance tracking stopped ({reason}) at {command.frequency_hz:.3f} Hz, "
+                f"{command.amplitude_percent:.2f} %"
+            )
+            if hold and controller.active and not controller.fault_reason:
+                self._apply_tracker(controller, now, command)
+        self._log_tracking_mode(now)
+
+    def _apply_tracker(
+        self, controller: DriveController, now: float, command: TrackerCommand
+    ) -> None:
+        """The tracker's set point through the controller's own checks, limits and ramps, with
+        target-speed mode (and its target) kept."""
+        speed_mode, target = controller.speed_mode, controller.target_speed_mps
+        answer = controller.set_drive(now, command.frequency_hz, command.amplitude_percent, 0.0)
+        controller.speed_mode, controller.target_speed_mps = speed_mode, target
+        if answer.outcome is Outcome.REFUSED:
+            self.get_logger().warn(
+                f"resonance tracking set point refused: {answer.reason}",
+                throttle_duration_sec=5.0,
+            )
+
+    def _log_tracking_mode(self, now: float) -> None:
+        tracker = self._tracker
+        if tracker is None or tracker.mode is self._tracking_mode:
+            return
+        previous, self._tracking_mode = self._tracking_mode, tracker.mode
+        status = tracker.status(now)
+        if status.mode is TrackerMode.HOLD:
+            self.get_logger().warn(f"resonance tracking: {status.reason}")
+        elif previous is TrackerMode.HOLD and status.mode is TrackerMode.ACTIVE:
+            self.get_logger().info("resonance tracking: speed feedback back, tracking again")
+
+    def _on_estimate(self, message: VehicleEstimate) -> None:
+        if self._tracker is None:
+            return
+        if not message.mean_speed_confidence >= self._values["tracking.min_confidence"]:
+            return  # an estimate without enough information is no reading
+        stamp = _stamp_s(message.header.stamp) or self._now()
+        self._tracker.feedback(stamp, message.mean_speed_mps)
+
+    def _on_speed_status(self, message: SpeedStatus) -> None:
+        if self._tracker is None:
+            return
+        stamp = _stamp_s(message.header.stamp) or self._now()
+        self._tracker.feedback(stamp, message.estimated_speed_mps)
 
     def _publish_diagnostics(self) -> None:
         controller, backend = self._controller, self._backend
@@ -680,7 +1016,40 @@ class DriveInterface(LifecycleNode):
             values["controller actual_amplitude_percent"] = f"{status.actual_amplitude_percent:.3f}"
         if not controller.active and level == DiagnosticStatus.OK:
             level, summary = DiagnosticStatus.WARN, f"inactive: {summary}"
+        if self._tracker is not None:
+            tracking = self._tracker.status(now)
+            values.update(self._tracking_values(tracking))
+            if tracking.mode is TrackerMode.HOLD and level == DiagnosticStatus.OK:
+                level = DiagnosticStatus.WARN
+                summary = f"{summary}; resonance tracking holding: speed feedback stale"
+            elif (
+                tracking.mode is TrackerMode.ACTIVE
+                and tracking.amplitude_limited
+                and level == DiagnosticStatus.OK
+            ):
+                level = DiagnosticStatus.WARN
+                summary = f"{summary}; resonance tracking: amplitude at its limit"
         self._publish_status(level, summary, backend.name, values)
+
+    def _tracking_values(self, tracking: TrackerStatus) -> dict[str, str]:
+        mode = _TRACKING_NAMES[tracking.mode]
+        note = tracking.reason if tracking.mode is not TrackerMode.OFF else self._tracking_note
+        age = tracking.feedback_age_s
+        return {
+            "resonance tracking": f"{mode}: {note}" if note else mode,
+            "tracking feedback": (
+                f"{self.resolve_topic_name(self._values['tracking.feedback_topic'])} "
+                f"({self._values['tracking.feedback_type']})"
+            ),
+            "tracked_frequency_hz": f"{tracking.centre_frequency_hz:.3f}",
+            "tracked_amplitude_percent": f"{tracking.amplitude_percent:.3f}",
+            "tracking measured_speed_mps": f"{tracking.measured_speed_mps:.6g}",
+            "tracking relative gradient 1/Hz": f"{tracking.gradient_per_hz:.4g}",
+            "tracking relative speed error": f"{tracking.speed_error:.4g}",
+            "tracking cycles": str(tracking.cycles),
+            "tracking feedback age s": "never" if math.isinf(age) else f"{age:.3f}",
+            "tracking amplitude limited": str(tracking.amplitude_limited),
+        }
 
     def _publish_status(
         self, level: bytes, summary: str, hardware_id: str, values: dict[str, str]
@@ -777,8 +1146,16 @@ class DriveInterface(LifecycleNode):
         answer = self._controller.set_target_speed(
             self._now(), request.speed_mps, request.ramp_time_s
         )
+        reason = answer.reason
+        if answer.outcome is not Outcome.REFUSED and self._tracker is not None:
+            # a new target: tracking restarts from the speed model's set point at the next tick
+            self._tracker.stop("new target speed")
+            self._tracking_refused = None
+            if self._values["tracking.enabled"]:
+                note = "resonance tracking refines frequency and amplitude from this set point"
+                reason = f"{reason}; {note}" if reason else note
         response.result = int(answer.outcome)
-        response.reason = answer.reason
+        response.reason = reason
         response.frequency_hz = answer.frequency_hz
         response.amplitude_percent = answer.amplitude_percent
         response.predicted_speed_mps = answer.predicted_speed_mps

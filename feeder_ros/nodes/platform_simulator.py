@@ -26,12 +26,7 @@ from rclpy.clock import Clock
 from rclpy.clock_type import ClockType
 from rclpy.node import Node
 from rclpy.parameter import Parameter
-from rclpy.qos import (
-    HistoryPolicy,
-    QoSProfile,
-    ReliabilityPolicy,
-    qos_profile_sensor_data,
-)
+from rclpy.qos import DurabilityPolicy, HistoryPolicy, QoSProfile, ReliabilityPolicy
 from rclpy.time import Time
 from rosgraph_msgs.msg import Clock as ClockMessage
 from sensor_msgs.msg import Imu
@@ -60,7 +55,15 @@ from feeder_ros.srv import SpawnParts
 PHYSICS_DEFAULTS = FeederParameters().as_dict()
 PARAMETERS = {**PARAMETER_SPECS, **NODE_PARAMETERS}
 
-SENSOR_QOS = qos_profile_sensor_data  # best effort, keep last 5
+# sensor data: best effort and volatile like qos_profile_sensor_data, but with a history deep
+# enough for a tick's burst (at 1 kHz and 10 ms ticks, 10 samples leave at once): with
+# qos_profile_sensor_data's depth of 5 the writer itself overwrote samples before sending them
+SENSOR_QOS = QoSProfile(
+    depth=100,
+    history=HistoryPolicy.KEEP_LAST,
+    reliability=ReliabilityPolicy.BEST_EFFORT,
+    durability=DurabilityPolicy.VOLATILE,
+)
 # ground truth and events: reliable, with a second of history at 1 kHz for slow readers
 STATE_QOS = QoSProfile(
     depth=1000, history=HistoryPolicy.KEEP_LAST, reliability=ReliabilityPolicy.RELIABLE
@@ -81,12 +84,15 @@ INTERFACE = NodeInterface(
     ),
     publishes=(
         TopicSpec(
-            "imu", "sensor_msgs/msg/Imu", "sensor data", "carrier accelerometer, x along track"
+            "imu",
+            "sensor_msgs/msg/Imu",
+            "best effort, depth 100",
+            "carrier accelerometer, x along track",
         ),
         TopicSpec(
             "imu/batch",
             "feeder_ros/msg/AccelerometerBatch",
-            "sensor data",
+            "best effort, depth 100",
             "the same samples in batches (publish_batches)",
         ),
         TopicSpec(
@@ -219,7 +225,20 @@ class PlatformSimulator(Node):
                 if parameter.name in PARAMETERS:
                     self._values[parameter.name] = parameter.value
             if changed & set(PARAMETER_SPECS):
-                self._sim.set_parameters(self._physics())
+                before = self._sim.params
+                self._sim.set_parameters(self._physics())  # the carrier state carries over
+                after = self._sim.params
+                if (before.forward_natural_frequency_hz, before.backward_natural_frequency_hz) != (
+                    after.forward_natural_frequency_hz,
+                    after.backward_natural_frequency_hz,
+                ):
+                    self.get_logger().info(
+                        f"plant changed live at t = {self._sim.time_s:.3f} s: f_n = "
+                        f"{after.forward_natural_frequency_hz:.2f} / "
+                        f"{after.backward_natural_frequency_hz:.2f} Hz (were "
+                        f"{before.forward_natural_frequency_hz:.2f} / "
+                        f"{before.backward_natural_frequency_hz:.2f} Hz)"
+                    )
             if changed & {"imu_noise_density_mps2_per_sqrt_hz", "imu_bias_mps2"} | {
                 "imu_saturation_mps2",
                 "imu_seed",
@@ -400,6 +419,7 @@ class PlatformSimulator(Node):
             if factor > 0.0:
                 lag = self._pace_sim_s + (wall_now - self._pace_wall_s) * factor - sim_now
             on_track = self._sim.part_count - self._parts_out
+            plant = self._sim.params
             values = {
                 "simulated_time_s": f"{sim_now:.6f}",
                 "achieved_real_time_factor": f"{(sim_now - sim_then) / (wall_now - wall_then):.3f}",
@@ -411,6 +431,8 @@ class PlatformSimulator(Node):
                 "parts_out_total": str(self._parts_out),
                 "drive_frequency_hz": f"{self._drive[0]:g}",
                 "drive_amplitude_n": f"{self._drive[1]:g}",
+                "forward_natural_frequency_hz": f"{plant.forward_natural_frequency_hz:.4g}",
+                "backward_natural_frequency_hz": f"{plant.backward_natural_frequency_hz:.4g}",
             }
         status = DiagnosticStatus(
             name=f"{self.get_fully_qualified_name()}: simulation",

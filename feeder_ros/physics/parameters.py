@@ -96,9 +96,15 @@ PARAMETER_SPECS: Final[dict[str, ParameterSpec]] = {
             read_only=True,
         ),
         _positive("plate_mass_kg", "kg", "mass m of the leaf-spring plate"),
-        _positive("carrier_mass_kg", "kg", "mass M of the carrier (vibrating beam)"),
-        _positive("part_mass_kg", "kg", "mass M_p of a part (the paper's vehicle)"),
-        _positive("youngs_modulus_pa", "Pa", "Young's modulus E of the plate"),
+        # stiffness and load may drift on a running feeder (spring ageing, tooling, parts): the
+        # simulator node applies them live, the carrier state carrying over (resonance tracking)
+        _positive(
+            "carrier_mass_kg", "kg", "mass M of the carrier (vibrating beam)", read_only=False
+        ),
+        _positive(
+            "part_mass_kg", "kg", "mass M_p of a part (the paper's vehicle)", read_only=False
+        ),
+        _positive("youngs_modulus_pa", "Pa", "Young's modulus E of the plate", read_only=False),
         _positive("forward_length_m", "m", "effective plate length L_f when bending forward"),
         _positive("backward_length_m", "m", "effective plate length L_b when bending backward"),
         _positive("plate_width_m", "m", "plate width w"),

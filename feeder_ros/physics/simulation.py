@@ -522,7 +522,14 @@ class FeederSimulator:
         self._regroup()
 
     def set_parameters(self, params: FeederParameters) -> None:
-        """Use new parameters from now on (damping, friction, track length, ...); state is kept."""
+        """Use new parameters from now on (damping, friction, track length, stiffness, masses, ...).
+
+        The state is kept: the carrier's displacement and velocity and every part's state carry
+        over unchanged (a drifting stiffness or load changes the carrier's acceleration, not its
+        motion), and the drive schedule continues phase-continuously. A new Young's modulus or
+        plate geometry changes both spring branches; new masses change ``M_eq`` (and, with
+        two-way coupling, the parts' masses). The stiffness branch is re-classified at once.
+        """
         if params.stiffness_model != "sharp":
             raise ParameterError(
                 f"stiffness_model={params.stiffness_model!r}: "
