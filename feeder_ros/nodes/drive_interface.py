@@ -51,6 +51,7 @@ from feeder_ros.drive.resonance_tracker import (
     TrackerStatus,
 )
 from feeder_ros.drive.speed_model import SpeedModel, cached_speed_table, default_cache_dir
+from feeder_ros.identification.speed_model_file import identified_speed_table, load_speed_model
 from feeder_ros.msg import DriveCommand, SpeedStatus, VehicleEstimate
 from feeder_ros.msg import DriveState as DriveStateMsg
 from feeder_ros.node_interfaces import NodeInterface, ServiceSpec, TopicSpec
@@ -171,6 +172,13 @@ NODE_PARAMETERS = (
         "",
         "directory of cached speed tables (keyed by every input); empty: "
         "$XDG_CACHE_HOME/feeder_ros/speed_tables",
+    ),
+    ParameterSpec(
+        "speed_model_file",
+        str,
+        "",
+        "identified speed model (YAML from `feeder identify --model-out`) used instead of the "
+        "simulated table; empty: the table" + _AT_CONFIGURE,
     ),
     ParameterSpec(
         "unreachable_speed",
@@ -408,6 +416,7 @@ DEFAULTS: dict[str, Any] = {
     "speed_model_amplitude_steps": 11,
     "speed_model_duration_s": 2.0,
     "speed_model_cache_dir": "",
+    "speed_model_file": "",
     "unreachable_speed": "refuse",
     "modbus.host": _MODBUS.host,
     "modbus.port": _MODBUS.port,
@@ -733,6 +742,8 @@ class DriveInterface(LifecycleNode):
         if not values["speed_model_enabled"]:
             self._speed_source = "disabled"
             return None
+        if values["speed_model_file"]:
+            return self._identified_speed_model(Path(values["speed_model_file"]), values, limits)
         cache = values["speed_model_cache_dir"]
         model, path, loaded = cached_speed_table(
             plant_from(values),
@@ -745,6 +756,25 @@ class DriveInterface(LifecycleNode):
         low, high = model.reachable_range()
         self._speed_source = (
             f"{'loaded' if loaded else 'computed'} table {path.name}, {low:.4g}..{high:.4g} m/s"
+        )
+        return model
+
+    def _identified_speed_model(
+        self, path: Path, values: dict[str, Any], limits: DriveLimits
+    ) -> SpeedModel:
+        """The identified model's speeds on the allowed frequencies (for the plant's part mass
+        when the file holds several); IdentificationError (a ValueError) fails the configure."""
+        model_file = load_speed_model(path.expanduser())
+        model = identified_speed_table(
+            model_file,
+            limits,
+            part_mass_kg=values[_PLANT_PREFIX + "part_mass_kg"],
+            frequency_steps=values["speed_model_frequency_steps"],
+        )
+        low, high = model.reachable_range()
+        self._speed_source = (
+            f"identified model {path.name} ({len(model_file.entries)} fits), "
+            f"{low:.4g}..{high:.4g} m/s"
         )
         return model
 

@@ -14,6 +14,7 @@ from contextlib import contextmanager
 from pathlib import Path
 from typing import Any
 
+import pytest
 import yaml
 from diagnostic_msgs.msg import DiagnosticArray, DiagnosticStatus
 from lifecycle_msgs.msg import Transition
@@ -28,8 +29,16 @@ from ros_test_tools import call, probe_node, running, wait_until
 from std_msgs.msg import Header
 from std_srvs.srv import Trigger
 
+from feeder_ros.drive.limits import DriveLimits
 from feeder_ros.drive.modbus import COMMAND_ENABLE, RegisterMap
 from feeder_ros.drive.modbus_emulator import ControllerEmulator, free_port
+from feeder_ros.identification.rational_fit import RationalModel
+from feeder_ros.identification.speed_model_file import (
+    ModelEntry,
+    SpeedModelFile,
+    identified_speed_table,
+    save_speed_model,
+)
 from feeder_ros.msg import CarrierState, DriveCommand, DriveState
 from feeder_ros.srv import SetDrive, SetTargetSpeed
 
@@ -496,6 +505,57 @@ def test_target_speed_mode_drives_the_platform_simulator(tmp_path: Path) -> None
             return bool(carrier) and carrier[-1].drive_amplitude_n == 0.0
 
         assert wait_until(simulator_stopped, 20.0)
+
+
+def test_identified_speed_model_file_replaces_the_simulated_table(tmp_path: Path) -> None:
+    """`feeder identify --model-out` -> drive interface: the requested speed is set where the
+    identified G(s) predicts it; a broken model file fails the configure with the reason."""
+    resonance = complex(-40.0, 2.0 * math.pi * 20.0)
+    entries = tuple(
+        ModelEntry(
+            amplitude_percent=percent,
+            amplitude_n=percent,  # full scale 100 N
+            part_mass_kg=0.05,
+            frequency_range_hz=(15.0, 30.0),
+            fit_percent=90.0,
+            model=RationalModel(
+                gain=0.05 * percent, zeros=(), poles=(resonance, resonance.conjugate())
+            ),
+        )
+        for percent in (30.0, 40.0, 50.0)
+    )
+    model_file = SpeedModelFile(full_scale_force_n=100.0, entries=entries, source="test")
+    path = tmp_path / "speed_model.yaml"
+    save_speed_model(path, model_file)
+    limits = DriveLimits(
+        min_frequency_hz=10.0, max_frequency_hz=60.0, max_amplitude_percent=100.0,
+        full_scale_force_n=100.0,
+    )  # fmt: skip
+    expected_model = identified_speed_table(
+        model_file, limits, part_mass_kg=0.05, frequency_steps=30
+    )  # the node's default speed_model_frequency_steps
+    low, high = expected_model.reachable_range()
+    target = 0.5 * (low + high)
+    expected = expected_model.choose(target)
+    assert expected is not None
+    params = (f"speed_model_file:={path}", "min_frequency_hz:=10.0", "max_frequency_hz:=60.0")
+    with drive_node("/drive_identified", *params) as cell:
+        cell.bring_up()
+        answer = cell.set_speed(target)
+        assert answer.result == SetTargetSpeed.Response.ACCEPTED, answer.reason
+        assert answer.frequency_hz == pytest.approx(expected.frequency_hz, abs=1e-9)
+        assert answer.amplitude_percent == pytest.approx(expected.amplitude_percent, abs=1e-9)
+        assert 15.0 <= answer.frequency_hz <= 30.0  # inside the identified band
+        assert answer.predicted_speed_mps == pytest.approx(target, rel=1e-9)
+        refused = cell.set_speed(2.0 * high)
+        assert refused.result == SetTargetSpeed.Response.REFUSED
+        assert f"{high:.4g}" in refused.reason
+
+    broken = tmp_path / "broken.yaml"
+    broken.write_text(path.read_text().replace("full_scale_force_n", "full_scale"))
+    with drive_node("/drive_identified_bad", f"speed_model_file:={broken}") as cell:
+        assert not cell.transition(Transition.TRANSITION_CONFIGURE)
+        assert cell.lifecycle_state() == "unconfigured"
 
 
 def _registers(emulator: ControllerEmulator, names: Sequence[str]) -> list[int]:
