@@ -37,6 +37,7 @@ from rclpy.topic_endpoint_info import TopicEndpointInfo
 
 from feeder_ros.bag import BagWriter
 from feeder_ros.bag.errors import BagError
+from feeder_ros.nodes.runner import StopOnShutdown
 
 __all__ = [
     "IGNORED_TOPICS",
@@ -244,22 +245,18 @@ def record(
                 on_ready()
             end = None if options.duration_s is None else time.monotonic() + options.duration_s
             summary.stopped_by = "shutdown"
+            guard = StopOnShutdown(context)
             try:
-                while context.ok():
-                    if end is not None and time.monotonic() >= end:
-                        summary.stopped_by = f"--duration {options.duration_s:g} s"
-                        break
-                    executor.spin_once(timeout_sec=0.05)
-                else:
+                with guard:
+                    while context.ok():
+                        if end is not None and time.monotonic() >= end:
+                            summary.stopped_by = f"--duration {options.duration_s:g} s"
+                            break
+                        executor.spin_once(timeout_sec=0.05)
+                    else:
+                        summary.stopped_by = "signal"
+                if guard.stopped:
                     summary.stopped_by = "signal"
-            except (KeyboardInterrupt, ExternalShutdownException):
-                summary.stopped_by = "signal"
-            except RuntimeError:
-                # rclpy can fail to take a message that arrived while the signal shut the
-                # context down: that is the stop we were asked for, anything else is an error
-                if context.ok():
-                    raise
-                summary.stopped_by = "signal"
             finally:
                 executor.remove_node(node)
                 node.destroy_node()

@@ -130,6 +130,7 @@ def run_composed(cell: CellDescription, parameters_file: Path, duration: float |
     from rclpy.executors import ExternalShutdownException
 
     from feeder_ros.nodes.catalog import NODE_MODULES
+    from feeder_ros.nodes.runner import StopOnShutdown
 
     modules = {name.rsplit(".", 1)[-1]: name for name in NODE_MODULES}
     classes = {
@@ -137,13 +138,8 @@ def run_composed(cell: CellDescription, parameters_file: Path, duration: float |
         for executable in {launch.executable for launch in cell.nodes}
     }
     try:
-        with rclpy.init() as init:
-            try:
-                _spin_composed(cell, classes, parameters_file, duration)
-            except RuntimeError:
-                # a message taken while Ctrl-C shut the context down: the stop we asked for
-                if init.context.ok():
-                    raise
+        with rclpy.init() as init, StopOnShutdown(init.context):
+            _spin_composed(cell, classes, parameters_file, duration)
     except (KeyboardInterrupt, ExternalShutdownException):
         # rclpy's handler shuts the context down, then chains to Python's (KeyboardInterrupt),
         # which can land anywhere in the shutdown: the cell is stopping either way

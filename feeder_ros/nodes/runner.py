@@ -4,13 +4,43 @@ from __future__ import annotations
 
 import sys
 from collections.abc import Callable, Sequence
+from typing import Any
 
 import rclpy
+from rclpy.context import Context
 from rclpy.exceptions import ParameterException
 from rclpy.executors import ExternalShutdownException, SingleThreadedExecutor
 from rclpy.node import Node
 
 from feeder_ros.physics.parameters import ParameterError
+
+
+class StopOnShutdown:
+    """``with StopOnShutdown(context):`` around a spin loop.
+
+    Ctrl-C, SIGTERM (rclpy turns both into a context shutdown, then a ``KeyboardInterrupt`` or
+    ``ExternalShutdownException``) and the ``RuntimeError`` rclpy raises when it takes a message
+    that arrived while the context was shutting down are the stop that was asked for: they end
+    the block quietly and set ``stopped``. Every other error propagates.
+    """
+
+    def __init__(self, context: Context) -> None:
+        self.context = context
+        self.stopped = False
+
+    def __enter__(self) -> StopOnShutdown:
+        return self
+
+    def __exit__(
+        self, kind: type[BaseException] | None, error: BaseException | None, trace: Any
+    ) -> bool:
+        if kind is None:
+            return False
+        requested = issubclass(kind, KeyboardInterrupt | ExternalShutdownException) or (
+            issubclass(kind, RuntimeError) and not self.context.ok()
+        )
+        self.stopped = requested
+        return requested
 
 
 def run_node(make_node: Callable[[], Node], args: Sequence[str] | None = None) -> int:
@@ -31,12 +61,8 @@ def run_node(make_node: Callable[[], Node], args: Sequence[str] | None = None) -
             executor = SingleThreadedExecutor()
             executor.add_node(node)
             try:
-                executor.spin()
-            except RuntimeError:
-                # rclpy can fail to take a message that arrived while Ctrl-C shut the context
-                # down; that is the shutdown we asked for, anything else is a real error.
-                if node.context.ok():
-                    raise
+                with StopOnShutdown(node.context):
+                    executor.spin()
             finally:
                 executor.remove_node(node)
                 node.destroy_node()
