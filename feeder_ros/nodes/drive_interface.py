@@ -23,7 +23,6 @@ is reported in ``/diagnostics`` (WARN) and ``drive/state`` (``status`` = TRACKIN
 from __future__ import annotations
 
 import math
-from dataclasses import replace
 from pathlib import Path
 from typing import Any
 
@@ -41,13 +40,12 @@ from std_srvs.srv import Trigger
 
 from feeder_ros.drive.backend import BackendStatus, DriveBackend, DriveOutput, SimBackend
 from feeder_ros.drive.controller import DriveController, DriveState
-from feeder_ros.drive.limits import DriveLimits, Outcome, parse_bands
-from feeder_ros.drive.modbus import ModbusSettings, ModbusTcpBackend, RegisterMap
+from feeder_ros.drive.limits import DriveLimits, Outcome
+from feeder_ros.drive.modbus import ModbusTcpBackend
 from feeder_ros.drive.resonance_tracker import (
     ResonanceTracker,
     TrackerCommand,
     TrackerMode,
-    TrackerSettings,
     TrackerStatus,
 )
 from feeder_ros.drive.speed_model import SpeedModel, cached_speed_table, default_cache_dir
@@ -55,407 +53,21 @@ from feeder_ros.identification.speed_model_file import identified_speed_table, l
 from feeder_ros.msg import DriveCommand, SpeedStatus, VehicleEstimate
 from feeder_ros.msg import DriveState as DriveStateMsg
 from feeder_ros.node_interfaces import NodeInterface, ServiceSpec, TopicSpec
+from feeder_ros.nodes.drive_interface_parameters import (
+    DEFAULTS,
+    LIMIT_PARAMETERS,
+    PARAMETERS,
+    PLANT_PREFIX,
+    TRACKER_FIELDS,
+    limits_from,
+    modbus_settings_from,
+    plant_from,
+    register_map_from,
+    tracker_settings_from,
+)
 from feeder_ros.nodes.ros_parameters import declare_parameters, validator
 from feeder_ros.nodes.runner import run_node
-from feeder_ros.physics.parameters import PARAMETER_SPECS, FeederParameters, ParameterSpec
 from feeder_ros.srv import SetDrive, SetTargetSpeed
-
-_AT_CONFIGURE = " (read at configure)"
-_PLANT_PREFIX = "plant."
-_PLANT_EXCLUDED = {"drive_frequency_hz", "drive_amplitude_n"}  # the drive is what we choose
-
-LIMIT_PARAMETERS = (
-    ParameterSpec("min_frequency_hz", float, "Hz", "lowest drive frequency", 0.1, 10000.0),
-    ParameterSpec("max_frequency_hz", float, "Hz", "highest drive frequency", 0.1, 10000.0),
-    ParameterSpec(
-        "max_amplitude_percent",
-        float,
-        "%",
-        "highest drive amplitude",
-        0.0,
-        100.0,
-        exclusive_minimum=True,
-    ),
-    ParameterSpec(
-        "max_frequency_rate_hz_per_s",
-        float,
-        "Hz/s",
-        "soft start/stop: fastest frequency change while driving",
-        0.0,
-        100000.0,
-        exclusive_minimum=True,
-    ),
-    ParameterSpec(
-        "max_amplitude_rate_percent_per_s",
-        float,
-        "%/s",
-        "soft start/stop: fastest amplitude change",
-        0.0,
-        100000.0,
-        exclusive_minimum=True,
-    ),
-    ParameterSpec(
-        "forbidden_bands_hz",
-        str,
-        "Hz",
-        "frequency bands a set point may not lie in (ramps cross them), as "
-        "'low, high, low, high, ...'; empty: none",
-    ),
-    ParameterSpec(
-        "full_scale_force_n",
-        float,
-        "N",
-        "drive force at 100 % amplitude (force = amplitude/100 * full scale)",
-        0.0,
-        1.0e6,
-        exclusive_minimum=True,
-    ),
-    ParameterSpec(
-        "heartbeat_timeout_s",
-        float,
-        "s",
-        "without a heartbeat for this long the drive ramps to zero and faults; "
-        "0 disables the watchdog",
-        0.0,
-        3600.0,
-    ),
-)
-NODE_PARAMETERS = (
-    ParameterSpec(
-        "backend", str, "", "drive backend" + _AT_CONFIGURE, choices=("sim", "modbus_tcp")
-    ),
-    ParameterSpec(
-        "publish_rate_hz",
-        float,
-        "Hz",
-        "output, drive/command and drive/state rate" + _AT_CONFIGURE,
-        1.0,
-        1000.0,
-    ),
-    ParameterSpec(
-        "diagnostics_period_s", float, "s", "/diagnostics period (read at start)", 0.05, 60.0
-    ),
-    ParameterSpec(
-        "speed_model_enabled",
-        bool,
-        "",
-        "build the physics speed table (target-speed mode)" + _AT_CONFIGURE,
-    ),
-    ParameterSpec(
-        "speed_model_frequency_steps",
-        int,
-        "1",
-        "speed table: frequencies over the allowed range" + _AT_CONFIGURE,
-        1,
-        1000,
-    ),
-    ParameterSpec(
-        "speed_model_amplitude_steps",
-        int,
-        "1",
-        "speed table: amplitudes from 0 to max_amplitude_percent" + _AT_CONFIGURE,
-        2,
-        1000,
-    ),
-    ParameterSpec(
-        "speed_model_duration_s",
-        float,
-        "s",
-        "speed table: simulated time per point (one part from rest)" + _AT_CONFIGURE,
-        0.0,
-        600.0,
-        exclusive_minimum=True,
-    ),
-    ParameterSpec(
-        "speed_model_cache_dir",
-        str,
-        "",
-        "directory of cached speed tables (keyed by every input); empty: "
-        "$XDG_CACHE_HOME/feeder_ros/speed_tables",
-    ),
-    ParameterSpec(
-        "speed_model_file",
-        str,
-        "",
-        "identified speed model (YAML from `feeder identify --model-out`) used instead of the "
-        "simulated table; empty: the table" + _AT_CONFIGURE,
-    ),
-    ParameterSpec(
-        "unreachable_speed",
-        str,
-        "",
-        "an unreachable target speed is refused (with the reachable range) or clamped "
-        "to the nearest reachable one",
-        choices=("refuse", "clamp"),
-    ),
-    ParameterSpec("modbus.host", str, "", "feeder controller address" + _AT_CONFIGURE),
-    ParameterSpec("modbus.port", int, "1", "Modbus TCP port" + _AT_CONFIGURE, 1, 65535),
-    ParameterSpec("modbus.device_id", int, "1", "Modbus unit/device id" + _AT_CONFIGURE, 0, 255),
-    ParameterSpec("modbus.timeout_s", float, "s", "request timeout" + _AT_CONFIGURE, 0.01, 60.0),
-    ParameterSpec(
-        "modbus.poll_period_s", float, "s", "write/read cycle" + _AT_CONFIGURE, 0.005, 10.0
-    ),
-    ParameterSpec(
-        "modbus.reconnect_min_s", float, "s", "first reconnect delay" + _AT_CONFIGURE, 0.01, 600.0
-    ),
-    ParameterSpec(
-        "modbus.command_timeout_s",
-        float,
-        "s",
-        "the I/O thread switches the drive off when the node has handed over no output for this "
-        "long (a hung node never leaves a stale command standing)" + _AT_CONFIGURE,
-        0.01,
-        60.0,
-    ),
-    ParameterSpec(
-        "modbus.reconnect_max_s",
-        float,
-        "s",
-        "reconnect delay cap (doubling back-off)" + _AT_CONFIGURE,
-        0.01,
-        600.0,
-    ),
-    *(
-        ParameterSpec(f"modbus.register.{name}", int, "1", f"{meaning} holding register", 0, 65535)
-        for name, meaning in (
-            ("command", "command word (bit 0 enable, bit 1 alarm reset)"),
-            ("frequency", "frequency set point"),
-            ("amplitude", "amplitude set point"),
-            ("ramp_time", "ramp time to the set point"),
-            ("heartbeat", "heartbeat counter (incremented each write)"),
-            ("status", "status word (running, alarm bits)"),
-            ("alarm_code", "controller alarm code"),
-            ("actual_frequency", "actual frequency"),
-            ("actual_amplitude", "actual amplitude"),
-        )
-    ),
-    ParameterSpec(
-        "modbus.scale.frequency_counts_per_hz",
-        float,
-        "1/Hz",
-        "frequency register counts per Hz",
-        0.0,
-        1.0e6,
-        exclusive_minimum=True,
-    ),
-    ParameterSpec(
-        "modbus.scale.amplitude_counts_per_percent",
-        float,
-        "1/%",
-        "amplitude register counts per %",
-        0.0,
-        1.0e6,
-        exclusive_minimum=True,
-    ),
-    ParameterSpec(
-        "modbus.scale.ramp_time_counts_per_s",
-        float,
-        "1/s",
-        "ramp-time register counts per s",
-        0.0,
-        1.0e6,
-        exclusive_minimum=True,
-    ),
-    ParameterSpec("modbus.status_running_bit", int, "1", "status word bit: running", 0, 15),
-    ParameterSpec("modbus.status_alarm_bit", int, "1", "status word bit: alarm", 0, 15),
-)
-_TRACKING = "resonance tracking: "
-TRACKING_PARAMETERS = (
-    ParameterSpec(
-        "tracking.enabled",
-        bool,
-        "",
-        _TRACKING + "in target-speed mode, keep the frequency on the measured part-speed peak "
-        "and trim the amplitude to the target speed (applies at once)",
-    ),
-    ParameterSpec(
-        "tracking.feedback_topic",
-        str,
-        "",
-        _TRACKING + "part-speed feedback topic (relative: the feeder's namespace)" + _AT_CONFIGURE,
-    ),
-    ParameterSpec(
-        "tracking.feedback_type",
-        str,
-        "",
-        _TRACKING + "its type: feeder_ros/VehicleEstimate (mean_speed_mps, confidence-gated) or "
-        "feeder_ros/SpeedStatus (estimated_speed_mps)" + _AT_CONFIGURE,
-        choices=("vehicle_estimate", "speed_status"),
-    ),
-    ParameterSpec(
-        "tracking.min_confidence",
-        float,
-        "1",
-        _TRACKING + "VehicleEstimate readings below this mean_speed_confidence are ignored",
-        0.0,
-        1.0,
-    ),
-    ParameterSpec(
-        "tracking.feedback_timeout_s",
-        float,
-        "s",
-        _TRACKING + "no valid speed reading this long (by its stamp): hold the centre frequency "
-        "and amplitude, WARN",
-        0.0,
-        600.0,
-        exclusive_minimum=True,
-    ),
-    ParameterSpec(
-        "tracking.dither_hz",
-        float,
-        "Hz",
-        _TRACKING + "frequency offset of each half-period from the centre",
-        0.0,
-        100.0,
-        exclusive_minimum=True,
-    ),
-    ParameterSpec(
-        "tracking.dither_period_s",
-        float,
-        "s",
-        _TRACKING + "one dither cycle (a half-period on each side); centre and amplitude move "
-        "once per cycle",
-        0.0,
-        3600.0,
-        exclusive_minimum=True,
-    ),
-    ParameterSpec(
-        "tracking.settle_s",
-        float,
-        "s",
-        _TRACKING + "discarded at the start of each half-period (drive transient, speed source "
-        "settling); < dither_period_s/2",
-        0.0,
-        1800.0,
-    ),
-    ParameterSpec(
-        "tracking.gain_hz2",
-        float,
-        "Hz^2",
-        _TRACKING + "centre step per unit relative speed gradient, (dv/df)/target in 1/Hz",
-        0.0,
-        1000.0,
-    ),
-    ParameterSpec(
-        "tracking.max_step_hz",
-        float,
-        "Hz",
-        _TRACKING + "largest centre frequency step per cycle",
-        0.0,
-        100.0,
-        exclusive_minimum=True,
-    ),
-    ParameterSpec(
-        "tracking.amplitude_kp_percent",
-        float,
-        "%",
-        _TRACKING + "amplitude trim, proportional: % per unit change of the relative speed error",
-        0.0,
-        1000.0,
-    ),
-    ParameterSpec(
-        "tracking.amplitude_ki_percent",
-        float,
-        "%",
-        _TRACKING + "amplitude trim, integral: % per cycle per unit relative speed error",
-        0.0,
-        1000.0,
-    ),
-    ParameterSpec(
-        "tracking.max_amplitude_step_percent",
-        float,
-        "%",
-        _TRACKING + "largest amplitude change per cycle",
-        0.0,
-        100.0,
-        exclusive_minimum=True,
-    ),
-)
-PLANT_PARAMETERS = tuple(
-    replace(
-        spec,
-        name=_PLANT_PREFIX + spec.name,
-        description="speed model plant: " + spec.description + _AT_CONFIGURE,
-        read_only=False,
-    )
-    for spec in PARAMETER_SPECS.values()
-    if spec.name not in _PLANT_EXCLUDED
-)
-PARAMETERS: dict[str, ParameterSpec] = {
-    spec.name: spec
-    for spec in (*LIMIT_PARAMETERS, *NODE_PARAMETERS, *TRACKING_PARAMETERS, *PLANT_PARAMETERS)
-}
-_MAP = RegisterMap()
-_MODBUS = ModbusSettings()
-_TRACKER = TrackerSettings()
-_TRACKER_FIELDS = (
-    "dither_hz",
-    "dither_period_s",
-    "settle_s",
-    "gain_hz2",
-    "max_step_hz",
-    "amplitude_kp_percent",
-    "amplitude_ki_percent",
-    "max_amplitude_step_percent",
-    "feedback_timeout_s",
-)
-DEFAULTS: dict[str, Any] = {
-    "min_frequency_hz": 5.0,
-    "max_frequency_hz": 300.0,
-    "max_amplitude_percent": 100.0,
-    "max_frequency_rate_hz_per_s": 50.0,
-    "max_amplitude_rate_percent_per_s": 50.0,
-    "forbidden_bands_hz": "",
-    "full_scale_force_n": 100.0,
-    "heartbeat_timeout_s": 2.0,
-    "backend": "sim",
-    "publish_rate_hz": 50.0,
-    "diagnostics_period_s": 1.0,
-    "speed_model_enabled": True,
-    "speed_model_frequency_steps": 30,
-    "speed_model_amplitude_steps": 11,
-    "speed_model_duration_s": 2.0,
-    "speed_model_cache_dir": "",
-    "speed_model_file": "",
-    "unreachable_speed": "refuse",
-    "modbus.host": _MODBUS.host,
-    "modbus.port": _MODBUS.port,
-    "modbus.device_id": _MODBUS.device_id,
-    "modbus.timeout_s": _MODBUS.timeout_s,
-    "modbus.poll_period_s": _MODBUS.poll_period_s,
-    "modbus.reconnect_min_s": _MODBUS.reconnect_min_s,
-    "modbus.reconnect_max_s": _MODBUS.reconnect_max_s,
-    "modbus.command_timeout_s": _MODBUS.command_timeout_s,
-    **{
-        f"modbus.register.{name}": getattr(_MAP, name)
-        for name in (
-            "command",
-            "frequency",
-            "amplitude",
-            "ramp_time",
-            "heartbeat",
-            "status",
-            "alarm_code",
-            "actual_frequency",
-            "actual_amplitude",
-        )
-    },
-    "modbus.scale.frequency_counts_per_hz": _MAP.frequency_counts_per_hz,
-    "modbus.scale.amplitude_counts_per_percent": _MAP.amplitude_counts_per_percent,
-    "modbus.scale.ramp_time_counts_per_s": _MAP.ramp_time_counts_per_s,
-    "modbus.status_running_bit": _MAP.status_running_bit,
-    "modbus.status_alarm_bit": _MAP.status_alarm_bit,
-    "tracking.enabled": False,
-    "tracking.feedback_topic": "estimate",
-    "tracking.feedback_type": "vehicle_estimate",
-    "tracking.min_confidence": 0.5,
-    **{f"tracking.{name}": getattr(_TRACKER, name) for name in _TRACKER_FIELDS},
-    **{
-        _PLANT_PREFIX + name: value
-        for name, value in FeederParameters().as_dict().items()
-        if name not in _PLANT_EXCLUDED
-    },
-}
 
 RELIABLE = QoSProfile(depth=10, reliability=ReliabilityPolicy.RELIABLE)
 
@@ -528,64 +140,6 @@ INTERFACE = NodeInterface(
     ),
     parameters=PARAMETERS,
 )
-
-
-def limits_from(values: dict[str, Any]) -> DriveLimits:
-    return DriveLimits(
-        min_frequency_hz=values["min_frequency_hz"],
-        max_frequency_hz=values["max_frequency_hz"],
-        max_amplitude_percent=values["max_amplitude_percent"],
-        max_frequency_rate_hz_per_s=values["max_frequency_rate_hz_per_s"],
-        max_amplitude_rate_percent_per_s=values["max_amplitude_rate_percent_per_s"],
-        forbidden_bands_hz=parse_bands(values["forbidden_bands_hz"]),
-        full_scale_force_n=values["full_scale_force_n"],
-    )
-
-
-def register_map_from(values: dict[str, Any]) -> RegisterMap:
-    registers = {
-        key.removeprefix("modbus.register."): value
-        for key, value in values.items()
-        if key.startswith("modbus.register.")
-    }
-    scales = {
-        key.removeprefix("modbus.scale."): value
-        for key, value in values.items()
-        if key.startswith("modbus.scale.")
-    }
-    return RegisterMap(
-        **registers,
-        **scales,
-        status_running_bit=values["modbus.status_running_bit"],
-        status_alarm_bit=values["modbus.status_alarm_bit"],
-    )
-
-
-def modbus_settings_from(values: dict[str, Any]) -> ModbusSettings:
-    return ModbusSettings(
-        host=values["modbus.host"],
-        port=values["modbus.port"],
-        device_id=values["modbus.device_id"],
-        timeout_s=values["modbus.timeout_s"],
-        poll_period_s=values["modbus.poll_period_s"],
-        reconnect_min_s=values["modbus.reconnect_min_s"],
-        reconnect_max_s=values["modbus.reconnect_max_s"],
-        command_timeout_s=values["modbus.command_timeout_s"],
-    )
-
-
-def plant_from(values: dict[str, Any]) -> FeederParameters:
-    return FeederParameters.from_mapping(
-        {
-            key.removeprefix(_PLANT_PREFIX): value
-            for key, value in values.items()
-            if key.startswith(_PLANT_PREFIX)
-        }
-    )
-
-
-def tracker_settings_from(values: dict[str, Any]) -> TrackerSettings:
-    return TrackerSettings(**{name: values[f"tracking.{name}"] for name in _TRACKER_FIELDS})
 
 
 def check_topic_name(name: str, parameter: str) -> None:
@@ -680,7 +234,7 @@ class DriveInterface(LifecycleNode):
             return
         now = self._now()
         self._tracking_refused = None  # new settings or limits: a refused start may work now
-        if changed & {f"tracking.{name}" for name in _TRACKER_FIELDS}:
+        if changed & {f"tracking.{name}" for name in TRACKER_FIELDS}:
             command = tracker.update_settings(tracker_settings_from(self._values), now)
             if command is not None:
                 self._apply_tracker(controller, now, command)
@@ -768,7 +322,7 @@ class DriveInterface(LifecycleNode):
         model = identified_speed_table(
             model_file,
             limits,
-            part_mass_kg=values[_PLANT_PREFIX + "part_mass_kg"],
+            part_mass_kg=values[PLANT_PREFIX + "part_mass_kg"],
             frequency_steps=values["speed_model_frequency_steps"],
         )
         low, high = model.reachable_range()
