@@ -100,7 +100,8 @@ NODE_PARAMETERS = (
         "speed_model_frequency_steps",
         int,
         "1",
-        "speed table: frequencies over the allowed range" + _AT_CONFIGURE,
+        "speed table: frequencies over the allowed range (an identified model: over its band)"
+        + _AT_CONFIGURE,
         1,
         1000,
     ),
