@@ -14,6 +14,7 @@ from __future__ import annotations
 
 import argparse
 import importlib
+import os
 import sys
 from collections.abc import Sequence
 from typing import Protocol, cast
@@ -26,6 +27,8 @@ SUBCOMMANDS: dict[str, str] = {
     "cell": "feeder_ros.cli.cell",
     "record": "feeder_ros.cli.record",
     "analyze": "feeder_ros.cli.analyze",
+    "identify": "feeder_ros.cli.identify",
+    "design": "feeder_ros.cli.design",
 }
 
 
@@ -67,6 +70,11 @@ def main(argv: Sequence[str] | None = None) -> int:
     except KeyboardInterrupt:
         print("feeder: interrupted", file=sys.stderr)
         return 130
+    except BrokenPipeError:
+        # the reader went away (``feeder ... | head``): not an error to report; stdout goes to
+        # devnull so that flushing it at exit does not raise again (Python's documented recipe)
+        os.dup2(os.open(os.devnull, os.O_WRONLY), sys.stdout.fileno())
+        return 1
     except (CommandError, ValueError, OSError) as error:
         print(f"feeder {args.command}: error: {error}", file=sys.stderr)
         return 2

@@ -1,0 +1,185 @@
+"""The live sweep source: its meters without ROS, then ``feeder identify --source live`` as a real
+process against a simulated cell (platform simulator + drive interface + speed monitor in one
+namespace), compared with the offline sweep of the same plant; Ctrl-C stops the drive."""
+
+from __future__ import annotations
+
+import math
+import signal
+import subprocess
+import sys
+import threading
+from pathlib import Path
+
+import pytest
+from rclpy.qos import QoSProfile, ReliabilityPolicy
+from ros_test_tools import REPO, probe_node, running, wait_until
+
+from feeder_ros.cli.sim import load_parameters
+from feeder_ros.identification.offline_sweep import offline_sweep
+from feeder_ros.identification.sweep import SweepPlan, SweepResult
+from feeder_ros.msg import DriveState
+from feeder_ros.nodes.sweep_client import StatusMeter, TransitMeter, TruthMeter
+
+BIN = Path(sys.executable).parent
+CONFIG = REPO / "config"
+RELIABLE = QoSProfile(depth=1000, reliability=ReliabilityPolicy.RELIABLE)
+#: live transits against the exact offline mean speed: edge timing on 20 ms state samples (linear
+#: interpolation), the part's back-and-forth within a cycle, a few transits per point
+LIVE_TOLERANCE = 0.08
+
+
+# --------------------------------------------------------------------------------- meters
+
+
+def test_transit_meter_pairs_edges_and_keeps_to_the_window() -> None:
+    meter = TransitMeter()
+    meter.add(0.5, 0, 0.10, 7, True)  # part 7 enters before the window: not counted
+    meter.add(1.2, 0, 0.10, 8, True)
+    meter.add(1.3, 0, 0.10, 8, False)  # falling edges are ignored
+    meter.add(1.4, 1, 0.11, 7, True)
+    meter.add(1.7, 1, 0.11, 8, True)  # part 8: 1 cm in 0.5 s
+    meter.add(2.0, 0, 0.10, None, True)  # sensors without part ids: first in, first out
+    meter.add(2.1, 0, 0.10, None, True)
+    meter.add(2.25, 1, 0.11, None, True)  # the part that entered at 2.0: 1 cm in 0.25 s
+    meter.add(3.5, 1, 0.11, None, True)  # the one of 2.1, after the window's end
+    window = meter.measure(1.0, 3.0)
+    assert window.count == 2
+    assert window.speed_mps == pytest.approx((0.02 + 0.04) / 2)
+    assert window.duration_s == pytest.approx((0.5 + 0.25) / 2)
+    assert meter.distance_m == pytest.approx(0.01)
+    assert meter.latest_s == 3.5
+    first = meter.first_transit(1.0)
+    assert first is not None
+    assert first.speed_mps == pytest.approx(0.02)
+    assert meter.first_transit(2.2) is None
+    assert not meter.measure(5.0, 9.0).ok
+
+
+def test_status_and_truth_meters() -> None:
+    status = StatusMeter()
+    for k in range(11):
+        status.add(k * 0.5, 0.01 if k < 6 else 0.02)
+    status.add(5.5, math.nan)  # unknown speed: ignored
+    assert status.measure(0.0, 2.0).speed_mps == pytest.approx(0.01)
+    assert status.measure(0.0, 2.0).count == 5
+    covered = status.covered(0.0, 4.0)  # each sample held until the next: 3 s of 10 mm/s, 1 s of 20
+    assert covered.covered_m == pytest.approx(0.05)
+    assert covered.speed_mps == pytest.approx(0.05 / 4.0)
+    truth = TruthMeter()
+    truth.add(0.9, {1: 0.0})
+    truth.add(1.0, {1: 0.010, 2: 0.0})
+    truth.add(2.0, {1: 0.030, 2: 0.01, 3: 0.0})  # part 3 new: not in the first snapshot
+    truth.add(3.0, {2: 0.03})  # part 1 left the track
+    m = truth.measure(1.0, 2.0)
+    assert m.count == 2
+    assert m.speed_mps == pytest.approx(0.015)
+    assert truth.measure(1.0, 3.0).speed_mps == pytest.approx(0.015)  # part 2 only
+
+
+# ----------------------------------------------------------------------------------- live
+
+NS = "/identify_live/feeder"
+SIMULATOR = [
+    str(BIN / "platform_simulator"), "--ros-args", "-r", f"__ns:={NS}",
+    "-r", "__node:=platform_simulator_realistic",
+    "--params-file", str(CONFIG / "platform_simulator.yaml"),
+    # light sensor streams, a bowl feeding a part every 0.3 s, two sensors 1 cm apart near the
+    # start of a short track (parts leave at 5 cm, so few are on it)
+    "-p", "imu_rate_hz:=100.0", "-p", "state_rate_hz:=50.0", "-p", "parts_rate_hz:=10.0",
+    "-p", "initial_parts:=0", "-p", "feed_interval_s:=0.3",
+    "-p", "sensor_positions_m:=0.02, 0.03", "-p", "track_length_m:=0.05",
+]  # fmt: skip
+DRIVE = [
+    str(BIN / "drive_interface"), "--ros-args", "-r", f"__ns:={NS}",
+    "--params-file", str(CONFIG / "drive_interface.yaml"),
+    "-p", "speed_model_enabled:=false", "-p", "min_frequency_hz:=10.0",
+    "-p", "max_frequency_hz:=60.0",
+]  # fmt: skip
+MONITOR = [str(BIN / "speed_monitor"), "--ros-args", "-r", f"__ns:={NS}"]
+SWEEP = [
+    str(BIN / "feeder"), "identify", "--source", "live", "--namespace", NS,
+    "--amplitudes", "40", "--masses", "0.05", "--settle", "1", "--measure", "sensors",
+    "--no-fit",
+]  # fmt: skip
+
+
+def test_live_sweep_matches_the_offline_sweep_and_ctrl_c_stops_the_drive(tmp_path: Path) -> None:
+    out = tmp_path / "live"
+    with (
+        running(SIMULATOR) as simulator,
+        running(DRIVE) as drive,
+        running(MONITOR) as monitor,
+        probe_node() as probe,
+    ):
+        states: list[DriveState] = []
+        lock = threading.Lock()
+
+        def on_state(message: DriveState) -> None:
+            with lock:
+                states.append(message)
+
+        probe.create_subscription(DriveState, f"{NS}/drive/state", on_state, RELIABLE)
+        # 4 points over the resonance, 3 s windows of part-sensor transits (the paper's timing)
+        sweep = subprocess.run(
+            [*SWEEP, "--frequencies", "19.5:22.5:1", "--window", "3", "--output", str(out)],
+            capture_output=True,
+            text=True,
+            timeout=180,
+        )
+        assert sweep.returncode == 0, sweep.stdout + sweep.stderr
+        assert "configuring the drive interface" in sweep.stderr  # brought up by the client
+        assert "sweep: 4 points, 4 usable, source live /identify_live/feeder" in sweep.stdout
+        # at the end the drive was stopped: ramped to zero, idle
+        assert wait_until(lambda: bool(states) and states[-1].state == DriveState.STATE_IDLE, 10)
+        assert states[-1].amplitude_percent == 0.0
+
+        # Ctrl-C in the middle of a sweep: exit status 130, and the drive ramps to zero
+        with lock:
+            states.clear()
+        interrupted = subprocess.Popen(
+            [*SWEEP, "--frequencies", "20:22:0.5", "--window", "10"],
+            stdout=subprocess.PIPE,
+            stderr=subprocess.STDOUT,
+            text=True,
+        )
+        try:
+
+            def driving() -> bool:
+                with lock:
+                    return any(
+                        s.state == DriveState.STATE_RUNNING and s.amplitude_percent == 40.0
+                        for s in states
+                    )
+
+            assert wait_until(driving, 60), "the interrupted sweep never drove the feeder"
+            interrupted.send_signal(signal.SIGINT)
+            output, _ = interrupted.communicate(timeout=30)
+        finally:
+            if interrupted.poll() is None:
+                interrupted.kill()
+        assert interrupted.returncode == 130, output
+        assert "interrupted" in output
+        assert wait_until(lambda: states[-1].state == DriveState.STATE_IDLE, 10), states[-1]
+        assert states[-1].amplitude_percent == 0.0
+        assert states[-1].fault_reason == ""  # stopped, not a watchdog fault
+    for process in (simulator, drive, monitor):
+        assert process.returncode == 0
+
+    live = SweepResult.read_csv(out / "sweep.csv")
+    plan = SweepPlan(
+        frequencies_hz=(19.5, 20.5, 21.5, 22.5),
+        amplitudes_percent=(40.0,),
+        part_masses_kg=(0.05,),  # the simulator's part mass
+        settle_s=1.0,
+        window_s=3.0,
+    )
+    plant = load_parameters(CONFIG / "platform_simulator.yaml", preset="realistic")
+    offline = offline_sweep(plant, plan)
+    for measured, exact in zip(live.points, offline.points, strict=True):
+        assert measured.ok, measured.reason
+        assert measured.frequency_hz == exact.frequency_hz
+        assert measured.amplitude_n == 40.0  # from drive/state: 40 % of 100 N
+        assert measured.speed_mps == pytest.approx(exact.speed_mps, rel=LIVE_TOLERANCE), (
+            measured.frequency_hz
+        )
