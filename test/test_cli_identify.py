@@ -208,3 +208,32 @@ def test_an_order_the_hold_out_cannot_score_is_left_out_not_the_whole_curve() ->
     assert outcome.best is not None
     assert (outcome.best.zeros, outcome.best.poles) == (0, 1)
     assert outcome.left_out == ["order 0/2 needs 6 frequencies for the hold-out check, 5 usable"]
+
+
+def test_the_loop_closes_identify_then_command_a_speed_then_it_is_reached(tmp_path: Path) -> None:
+    """identify (simulator sweep) -> model file -> the drive interface's target-speed choice
+    (the same identified table the node builds) -> the exact simulation at that setting reaches
+    the target within the speed monitor's default tolerance (no under/overspeed alarm)."""
+    from feeder_ros.drive.limits import DriveLimits
+    from feeder_ros.identification.speed_model_file import identified_speed_table, load_speed_model
+    from feeder_ros.monitoring.speed_monitor import MonitorConfig
+    from feeder_ros.physics.simulation import simulate_many
+
+    model_path = tmp_path / "model.yaml"
+    args = ["identify", "--amplitudes", "30,40,50", "--masses", "0.05"]
+    assert main([*args, "--model-out", str(model_path)]) == 0
+    limits = DriveLimits(min_frequency_hz=10.0, max_frequency_hz=60.0)
+    table = identified_speed_table(load_speed_model(model_path), limits, part_mass_kg=0.05)
+    plant = load_parameters(default_config_path(), preset="realistic")
+    assert plant.part_mass_kg == 0.05
+    tolerance = MonitorConfig().speed_tolerance
+    for target in (0.006, 0.010, 0.015, 0.020):
+        choice = table.choose(target)
+        assert choice is not None, target
+        point = plant.with_changes(
+            drive_frequency_hz=choice.frequency_hz,
+            drive_amplitude_n=limits.force_n(choice.amplitude_percent),
+            track_length_m=1e3,
+        )
+        reached = simulate_many([point], 5.0, settle_s=1.0).mean_part_speed_mps[0]
+        assert abs(reached / target - 1.0) < tolerance, (target, choice, reached)
