@@ -8,26 +8,16 @@ was analysed, 2 when none could be.
 from __future__ import annotations
 
 import argparse
-import math
 import sys
 from pathlib import Path
 
+from feeder_ros.cli.arguments import non_negative_float
 from feeder_ros.cli.main import CommandError
 from feeder_ros.cli.progress import ProgressBar
 
 __all__ = ["HELP", "add_arguments", "run"]
 
 HELP = "analyse recorded feeder bags: drive segments, part speed, slip, feed rate, diagnostics"
-
-
-def _non_negative(text: str) -> float:
-    try:
-        value = float(text)
-    except ValueError:
-        raise argparse.ArgumentTypeError(f"{text!r} is not a number") from None
-    if not (value >= 0.0 and math.isfinite(value)):
-        raise argparse.ArgumentTypeError(f"{text!r} must be >= 0 and finite")
-    return value
 
 
 def add_arguments(parser: argparse.ArgumentParser) -> None:
@@ -37,7 +27,7 @@ def add_arguments(parser: argparse.ArgumentParser) -> None:
     )
     parser.add_argument(
         "--min-segment",
-        type=_non_negative,
+        type=non_negative_float,
         default=0.5,
         metavar="S",
         help="segments shorter than this (ramps) are left out (default 0.5 s)",

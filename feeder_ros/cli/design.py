@@ -30,6 +30,7 @@ from typing import Any
 import numpy as np
 import yaml
 
+from feeder_ros.cli.arguments import positive_int
 from feeder_ros.cli.main import CommandError
 from feeder_ros.cli.progress import ProgressBar
 from feeder_ros.cli.sim import atomic_text, default_config_path, load_parameters
@@ -62,16 +63,6 @@ DESIGN_NAME = "design.yaml"
 #: the node key of the written parameter file (any namespace, as config/platform_simulator.yaml)
 PARAMS_FILE_NODE = "/**/platform_simulator"
 _NO_PRESET = "none"
-
-
-def _positive_int(text: str) -> int:
-    try:
-        value = int(text)
-    except ValueError:
-        raise argparse.ArgumentTypeError(f"{text!r} is not an integer") from None
-    if value < 1:
-        raise argparse.ArgumentTypeError(f"{text!r} must be >= 1")
-    return value
 
 
 def _speed(text: str) -> float:
@@ -116,23 +107,23 @@ def add_arguments(parser: argparse.ArgumentParser) -> None:
     )
     parser.add_argument("--seed", type=int, default=0, help="optimiser seed (default 0)")
     parser.add_argument(
-        "--generations", type=_positive_int, default=30, help="generations at most (default 30)"
+        "--generations", type=positive_int, default=30, help="generations at most (default 30)"
     )
     parser.add_argument(
         "--population",
-        type=_positive_int,
+        type=positive_int,
         default=42,
         help="designs per generation, rounded up to a multiple of the variables (default 42)",
     )
     parser.add_argument(
         "--max-evaluations",
-        type=_positive_int,
+        type=positive_int,
         metavar="N",
         help="designs simulated at most (caps --generations)",
     )
     parser.add_argument(
         "--map-points",
-        type=_positive_int,
+        type=positive_int,
         default=15,
         help="speed-map grid points per axis (--output; default 15)",
     )

@@ -33,6 +33,7 @@ from typing import TYPE_CHECKING, Any
 
 import yaml
 
+from feeder_ros.cli.arguments import non_negative_float, positive_float
 from feeder_ros.cli.main import CommandError
 from feeder_ros.cli.progress import ProgressBar
 from feeder_ros.cli.sim import atomic_text, default_config_path, load_parameters
@@ -70,26 +71,6 @@ def default_plan_path() -> Path:
 # ------------------------------------------------------------------------------------ options
 
 
-def _positive(text: str) -> float:
-    try:
-        value = float(text)
-    except ValueError:
-        raise argparse.ArgumentTypeError(f"{text!r} is not a number") from None
-    if not (value > 0.0 and math.isfinite(value)):
-        raise argparse.ArgumentTypeError(f"{text!r} must be positive and finite")
-    return value
-
-
-def _non_negative(text: str) -> float:
-    try:
-        value = float(text)
-    except ValueError:
-        raise argparse.ArgumentTypeError(f"{text!r} is not a number") from None
-    if not (value >= 0.0 and math.isfinite(value)):
-        raise argparse.ArgumentTypeError(f"{text!r} must be >= 0 and finite")
-    return value
-
-
 def add_arguments(parser: argparse.ArgumentParser) -> None:
     parser.add_argument(
         "inputs",
@@ -110,25 +91,34 @@ def add_arguments(parser: argparse.ArgumentParser) -> None:
     )
     group.add_argument("--amplitudes", metavar="LIST", help="percent of full scale, e.g. 35:47:2")
     group.add_argument("--masses", metavar="LIST", help="part masses in kg, e.g. 0.031,0.06")
-    group.add_argument("--settle", type=_non_negative, metavar="S", help="settle time per point")
-    group.add_argument("--window", type=_positive, metavar="S", help="measurement window per point")
     group.add_argument(
-        "--distance", type=_positive, metavar="M", help="measure over this travel instead (0.085)"
+        "--settle", type=non_negative_float, metavar="S", help="settle time per point"
     )
     group.add_argument(
-        "--max-window", type=_positive, metavar="S", help="distance mode: longest measurement"
+        "--window", type=positive_float, metavar="S", help="measurement window per point"
     )
     group.add_argument(
-        "--full-scale", type=_positive, metavar="N", help="force at 100 %% amplitude"
+        "--distance",
+        type=positive_float,
+        metavar="M",
+        help="measure over this travel instead (0.085)",
     )
-    group.add_argument("--ramp-time", type=_non_negative, metavar="S", help="live: ramp per step")
+    group.add_argument(
+        "--max-window", type=positive_float, metavar="S", help="distance mode: longest measurement"
+    )
+    group.add_argument(
+        "--full-scale", type=positive_float, metavar="N", help="force at 100 %% amplitude"
+    )
+    group.add_argument(
+        "--ramp-time", type=non_negative_float, metavar="S", help="live: ramp per step"
+    )
     fit = parser.add_argument_group("fit")
     fit.add_argument(
         "--orders", metavar="Z/P,...", help=f"model orders zeros/poles (default {DEFAULT_ORDERS})"
     )
     fit.add_argument(
         "--min-speed",
-        type=_non_negative,
+        type=non_negative_float,
         metavar="M/S",
         help="fit only points faster than this (default 0: parts moving forward)",
     )

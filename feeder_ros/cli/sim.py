@@ -25,6 +25,7 @@ from typing import TYPE_CHECKING, Any, TextIO
 import numpy as np
 import yaml
 
+from feeder_ros.cli.arguments import non_negative_int, positive_float
 from feeder_ros.cli.main import CommandError
 from feeder_ros.cli.progress import ProgressBar
 from feeder_ros.nodes.platform_simulator_parameters import NODE_PARAMETERS
@@ -121,26 +122,6 @@ def load_parameters(
     return params.with_changes(**changes) if changes else params
 
 
-def _positive_float(text: str) -> float:
-    try:
-        value = float(text)
-    except ValueError:
-        raise argparse.ArgumentTypeError(f"{text!r} is not a number") from None
-    if not (value > 0.0 and math.isfinite(value)):
-        raise argparse.ArgumentTypeError(f"{text!r} must be positive and finite")
-    return value
-
-
-def _part_count(text: str) -> int:
-    try:
-        value = int(text)
-    except ValueError:
-        raise argparse.ArgumentTypeError(f"{text!r} is not an integer") from None
-    if value < 0:
-        raise argparse.ArgumentTypeError(f"{text!r} must be >= 0")
-    return value
-
-
 def add_arguments(parser: argparse.ArgumentParser) -> None:
     parser.add_argument("--config", type=Path, help=f"simulator YAML (default: {CONFIG_NAME})")
     parser.add_argument(
@@ -156,16 +137,16 @@ def add_arguments(parser: argparse.ArgumentParser) -> None:
         help="override one model parameter (repeatable), e.g. --set drive_amplitude_n=40",
     )
     parser.add_argument(
-        "--duration", type=_positive_float, default=1.0, help="simulated time in s (default 1)"
+        "--duration", type=positive_float, default=1.0, help="simulated time in s (default 1)"
     )
     parser.add_argument(
         "--rate",
-        type=_positive_float,
+        type=positive_float,
         default=1000.0,
         help="output samples per second; samples at exact multiples of 1/rate (default 1000)",
     )
     parser.add_argument(
-        "--parts", type=_part_count, default=1, help="number of parts on the track (default 1)"
+        "--parts", type=non_negative_int, default=1, help="number of parts on the track (default 1)"
     )
     parser.add_argument("--output", type=Path, help="write the samples to this CSV file")
     parser.add_argument("--events", type=Path, help="write the events (t_s,kind,part) to this CSV")
