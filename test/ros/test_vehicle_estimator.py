@@ -90,10 +90,7 @@ def test_namespaced_feeders_side_by_side_estimate_their_own_true_speed() -> None
         assert wait_until(settled, 60.0), {
             ns: (r[-1].status, r[-1].status_message) if r else None for ns, r in estimates.items()
         }
-        counts = {ns: len(records) for ns, records in estimates.items()}
         time.sleep(3.0)  # a full estimator window (2 s) of steady state
-        for ns, records in estimates.items():  # every sample arrived: no gap reported since
-            assert {r.status for r in records[counts[ns] :]} == {VehicleEstimate.STATUS_OK}
         speeds = {}
         for ns in feeders:
             last = estimates[ns][-1]
