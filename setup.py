@@ -35,7 +35,7 @@ setup(
         (f"share/{PACKAGE}/launch", glob("launch/*.launch.py")),
         ("share/ament_index/resource_index/packages", [f"resource/{PACKAGE}"]),
     ],
-    install_requires=["numpy", "scipy", "numba", "pyyaml", "mcap", "zstandard", "matplotlib"],
+    install_requires=["numpy", "scipy>=1.15", "numba", "pyyaml", "mcap", "zstandard", "matplotlib"],
     extras_require={"test": ["pytest", "pytest-timeout", "rosbags", "ruff", "mypy"]},
     entry_points={"console_scripts": CONSOLE_SCRIPTS},
     zip_safe=False,

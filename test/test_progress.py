@@ -10,7 +10,7 @@ from feeder_ros.cli.progress import ProgressBar
 def test_bar_draws_each_percentage_once_and_ends_the_line() -> None:
     out = io.StringIO()
     bar = ProgressBar("sweep", 200, True, stream=out)
-    for done in (0, 1, 2, 100, 100.4, 200, 250):
+    for done in (0, 1, float("nan"), 2, 100, 100.4, 200, 250):  # nan: not drawn, no error
         bar.update(done)
     bar.close()
     frames = out.getvalue().split("\r")[1:]

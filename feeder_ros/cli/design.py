@@ -51,6 +51,7 @@ from feeder_ros.design.sensitivity import (
     speed_map,
 )
 from feeder_ros.design.space import DesignConfig, DesignSpace, load_design_config
+from feeder_ros.figures import save_figure
 from feeder_ros.physics.parameters import FeederParameters
 
 __all__ = ["DESIGN_NAME", "HELP", "PARAMS_FILE_NODE", "add_arguments", "run"]
@@ -471,8 +472,7 @@ def plot_convergence(path: Path, result: DesignResult, reference: DesignEvaluati
         ax.set(ylabel="drive amplitude A [N]")
     ax.set(xlabel="designs evaluated", title=f"Design search ({problem.objective})")
     ax.legend(loc="best", fontsize="small")
-    fig.savefig(path, dpi=110)
-    return path
+    return save_figure(fig, path)
 
 
 def plot_speed_map(path: Path, grid: SpeedMap, result: DesignResult) -> Path:
@@ -510,5 +510,4 @@ def plot_speed_map(path: Path, grid: SpeedMap, result: DesignResult) -> Path:
         title="Part speed (faded: a condition of set S or validity not met)",
     )
     ax.legend(loc="best", fontsize="small")
-    fig.savefig(path, dpi=110)
-    return path
+    return save_figure(fig, path)

@@ -2,6 +2,7 @@
 
 from __future__ import annotations
 
+import math
 import sys
 from typing import TextIO
 
@@ -30,6 +31,8 @@ class ProgressBar:
 
     def update(self, done: float) -> None:
         if not self.enabled:
+            return
+        if not math.isfinite(done):
             return
         fraction = min(max(done / self.total, 0.0), 1.0) if self.total > 0 else 1.0
         percent = int(100.0 * fraction)

@@ -213,13 +213,16 @@ class ResonanceTracker:
         or when holding). The centre, amplitude and trim state carry over."""
         settings.check_against(self._limits)
         self._settings = settings
-        if self._mode is not TrackerMode.ACTIVE:
+        if self._mode is TrackerMode.OFF:
             return None
+        # the new dither must fit around the centre (also while holding: tracking resumes there)
         centre = self._window(self._centre)
         if centre is None:
             self._off(f"the dither (+-{settings.dither_hz:g} Hz) no longer fits here")
             return None
         self._centre = min(max(self._centre, centre[0]), centre[1])
+        if self._mode is TrackerMode.HOLD:
+            return None
         self._restart_cycle()
         return self._emit(now_s, self._centre + self._side * settings.dither_hz)
 
@@ -341,6 +344,9 @@ class ResonanceTracker:
             self._last_valid_s = -math.inf
             self._restart_cycle()
             self._last_now = now_s
+            if self._mode is TrackerMode.HOLD:  # keep holding the centre, on the new clock
+                self._hold_s = now_s
+                return self._emit(now_s, self._centre)
             return self._emit(now_s, self._centre + self._side * self._settings.dither_hz)
         self._last_now = now_s
         settings = self._settings

@@ -12,10 +12,7 @@ written to a temporary file beside the target and renamed, so no half-written PN
 
 from __future__ import annotations
 
-import contextlib
 import math
-import os
-import tempfile
 from collections.abc import Mapping, Sequence
 from pathlib import Path
 from typing import Any, Protocol
@@ -23,9 +20,9 @@ from typing import Any, Protocol
 import numpy as np
 import numpy.typing as npt
 from matplotlib import ticker
-from matplotlib.backends.backend_agg import FigureCanvasAgg
 from matplotlib.figure import Figure
 
+from feeder_ros.figures import save_figure
 from feeder_ros.identification.sweep import SweepGroup, SweepResult
 
 __all__ = ["MagnitudeModel", "plot_bode_magnitude", "plot_speed_sweep"]
@@ -37,22 +34,6 @@ class MagnitudeModel(Protocol):
     """What a figure needs of a fitted model (``RationalModel`` has it)."""
 
     def magnitude(self, f_hz: Any) -> Any: ...
-
-
-def _save(figure: Figure, path: Path) -> Path:
-    path = Path(path)
-    FigureCanvasAgg(figure)
-    fd, temp = tempfile.mkstemp(prefix=f".{path.name}.", suffix=".png", dir=path.parent or ".")
-    os.close(fd)
-    try:
-        figure.savefig(temp, dpi=110)
-        os.chmod(temp, 0o644)
-        os.replace(temp, path)
-    except BaseException:
-        with contextlib.suppress(OSError):
-            os.unlink(temp)
-        raise
-    return path
 
 
 def _panels(count: int) -> tuple[int, int]:
@@ -95,7 +76,7 @@ def plot_speed_sweep(result: SweepResult, path: Path, title: str = "") -> Path:
     for k in range(len(masses), rows * columns):
         axes[k // columns][k % columns].set_visible(False)
     figure.suptitle(title or f"speed sweep ({result.source})")
-    return _save(figure, path)
+    return save_figure(figure, path)
 
 
 def plot_bode_magnitude(
@@ -155,7 +136,7 @@ def plot_bode_magnitude(
     for k in range(len(masses), rows * columns):
         axes[k // columns][k % columns].set_visible(False)
     figure.suptitle(title or "frequency response: data and fitted G(s)")
-    return _save(figure, path)
+    return save_figure(figure, path)
 
 
 def _colors(count: int) -> list[Any]:

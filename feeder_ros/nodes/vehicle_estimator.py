@@ -16,6 +16,7 @@ from typing import Any
 
 import numpy as np
 from diagnostic_msgs.msg import DiagnosticArray, DiagnosticStatus, KeyValue
+from rclpy.exceptions import InvalidHandle
 from rclpy.node import Node
 from rclpy.parameter import Parameter
 from rclpy.qos import QoSProfile, ReliabilityPolicy
@@ -271,12 +272,15 @@ class VehicleEstimatorNode(Node):
         """
         taken: list[bytes] = []
         handle = self._imu_subscription.handle
-        with handle:
-            while len(taken) < _IMU_DRAIN_LIMIT:
-                message_info = handle.take_message(Imu, True)
-                if message_info is None:
-                    break
-                taken.append(message_info[0])
+        try:
+            with handle:
+                while len(taken) < _IMU_DRAIN_LIMIT:
+                    message_info = handle.take_message(Imu, True)
+                    if message_info is None:
+                        break
+                    taken.append(message_info[0])
+        except InvalidHandle:  # the node is being destroyed (shutdown): as the executor does
+            pass
         return taken
 
     def _on_batch(self, message: AccelerometerBatch) -> None:

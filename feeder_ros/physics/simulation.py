@@ -1065,6 +1065,7 @@ def simulate_many(
             whole.mean_part_speed_mps * whole_span - head.mean_part_speed_mps * head_span
         ) / window
         slip = (whole.slip_fraction * whole_span - head.slip_fraction * head_span) / window
+    slip = np.clip(slip, 0.0, 1.0)  # a difference of two totals: round-off can leave [0, 1]
     gone = np.isfinite(head.exit_t_s)
     return ManySummary(
         mean_part_speed_mps=np.where(gone, np.nan, speed),

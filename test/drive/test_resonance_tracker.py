@@ -228,6 +228,39 @@ def test_a_clock_jumping_back_restarts_the_cycle() -> None:
     assert loop.tracker.mode is TrackerMode.ACTIVE
 
 
+def test_a_clock_jumping_back_while_holding_keeps_holding_the_centre_then_resumes() -> None:
+    tracker = ResonanceTracker(FAST, LIMITS)
+    loop = Loop(tracker, lorentz_speed(lambda t: 20.0, lambda t: 0.5e-3))
+    loop.start(target=0.012)
+    loop.run(20.0)
+    tracker.update(25.0)  # no reading for 5 s: HOLD at the centre
+    assert tracker.mode is TrackerMode.HOLD
+    centre = tracker.status(25.0).centre_frequency_hz
+    command = tracker.update(0.5)  # e.g. the simulator was reset (sim time)
+    assert command is not None
+    assert command.frequency_hz == centre, "holding: the centre, not a dithered frequency"
+    assert tracker.mode is TrackerMode.HOLD
+    tracker.feedback(1.0, 0.012)  # fresh readings on the new clock end the hold
+    assert tracker.update(1.1) is not None
+    assert tracker.mode is TrackerMode.ACTIVE
+
+
+def test_new_settings_while_holding_move_the_centre_out_of_a_band() -> None:
+    limits = DriveLimits(
+        min_frequency_hz=10.0, max_frequency_hz=40.0, forbidden_bands_hz=((28.0, 29.0),)
+    )
+    tracker = ResonanceTracker(FAST, limits)
+    loop = Loop(tracker, lorentz_speed(lambda t: 29.6, lambda t: 0.5e-3), limits=limits, f=29.6)
+    loop.start(target=0.012)
+    loop.run(10.0)
+    tracker.update(14.0)  # stale: HOLD
+    assert tracker.mode is TrackerMode.HOLD
+    wide = TrackerSettings(**{**FAST.__dict__, "dither_hz": 1.0})
+    assert tracker.update_settings(wide, 14.0) is None  # holding: no new set point yet
+    centre = tracker.status(14.0).centre_frequency_hz
+    assert centre - 1.0 >= 29.0, "the wider dither must not reach into the band on resuming"
+
+
 @pytest.mark.parametrize(
     ("changes", "needle"),
     [
