@@ -151,6 +151,11 @@ def add_arguments(parser: argparse.ArgumentParser) -> None:
         "estimated speed; truth: the simulator's part states",
     )
     live.add_argument(
+        "--use-sim-time",
+        action="store_true",
+        help="time settle and windows on the cell's /clock (a simulator with use_sim_time)",
+    )
+    live.add_argument(
         "--no-lifecycle",
         action="store_true",
         help="do not configure/activate the drive interface (it must be active)",
@@ -282,6 +287,7 @@ def _sweep_live(args: argparse.Namespace, plan: SweepPlan, show: bool) -> SweepR
             manage_lifecycle=not args.no_lifecycle,
             progress=lambda done, total: bar.update(done),
             log=lambda text: _note(text, bar),
+            use_sim_time=args.use_sim_time,
         )
     except LiveSweepError as error:
         raise CommandError(str(error)) from None

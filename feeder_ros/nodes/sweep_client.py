@@ -52,6 +52,7 @@ from rcl_interfaces.srv import GetParameters
 from rclpy.context import Context
 from rclpy.executors import SingleThreadedExecutor
 from rclpy.node import Node
+from rclpy.parameter import Parameter
 from rclpy.qos import QoSProfile, ReliabilityPolicy
 from rclpy.signals import SignalHandlerOptions
 from rclpy.time import Time
@@ -608,13 +609,18 @@ def check_live_plan(plan: SweepPlan) -> None:
 
 
 @contextmanager
-def _spinning_node(namespace: str) -> Iterator[Node]:
+def _spinning_node(namespace: str, use_sim_time: bool = False) -> Iterator[Node]:
     """A node in its own context (no signal handlers: Ctrl-C leaves it up to stop the drive),
-    spun by a background thread."""
+    spun by a background thread; on the cell's ``/clock`` with ``use_sim_time``."""
     context = Context()
     rclpy.init(context=context, signal_handler_options=SignalHandlerOptions.NO)
     try:
-        node = rclpy.create_node("sweep_client", namespace=namespace or "/", context=context)
+        node = rclpy.create_node(
+            "sweep_client",
+            namespace=namespace or "/",
+            context=context,
+            parameter_overrides=[Parameter("use_sim_time", value=use_sim_time)],
+        )
     except Exception:
         rclpy.shutdown(context=context)
         raise
@@ -638,14 +644,16 @@ def run_live_sweep(
     manage_lifecycle: bool = True,
     progress: Progress | None = None,
     log: Log | None = None,
+    use_sim_time: bool = False,
 ) -> SweepResult:
     """Run ``plan`` on the cell in ``namespace`` (see the module docstring); the drive is stopped
-    at the end, on errors and on Ctrl-C."""
+    at the end, on errors and on Ctrl-C. ``use_sim_time``: settle and windows on the cell's
+    ``/clock`` (a simulator running faster than real time), as the cell's nodes use it."""
     say: Log = log or (lambda text: None)
     check_live_plan(plan)
     if namespace and not namespace.startswith("/"):
         namespace = "/" + namespace
-    with _spinning_node(namespace) as node:
+    with _spinning_node(namespace, use_sim_time) as node:
         client = SweepClient(node, measure, say, manage_lifecycle)
         try:
             return client.run(plan, progress)

@@ -183,3 +183,33 @@ def test_live_sweep_matches_the_offline_sweep_and_ctrl_c_stops_the_drive(tmp_pat
         assert measured.speed_mps == pytest.approx(exact.speed_mps, rel=LIVE_TOLERANCE), (
             measured.frequency_hz
         )
+
+
+def test_live_sweep_on_the_cells_clock_with_a_simulator_faster_than_real_time(
+    tmp_path: Path,
+) -> None:
+    """Every node on the simulator's /clock at 2x real time: the client's settle and windows
+    follow that clock (--use-sim-time) and the speeds agree with the offline sweep."""
+    sim_time = ["-p", "use_sim_time:=true"]
+    simulator = [*SIMULATOR, *sim_time, "-p", "real_time_factor:=2.0"]
+    out = tmp_path / "clocked"
+    with running(simulator), running([*DRIVE, *sim_time]), running([*MONITOR, *sim_time]):
+        sweep = subprocess.run(
+            [*SWEEP, "--use-sim-time", "--frequencies", "20:21:1", "--window", "3",
+             "--output", str(out)],
+            capture_output=True, text=True, timeout=180,
+        )  # fmt: skip
+        assert sweep.returncode == 0, sweep.stdout + sweep.stderr
+        assert f"sweep: 2 points, 2 usable, source live {NS}" in sweep.stdout
+    live = SweepResult.read_csv(out / "sweep.csv")
+    plan = SweepPlan(
+        frequencies_hz=(20.0, 21.0),
+        amplitudes_percent=(40.0,),
+        part_masses_kg=(0.05,),
+        settle_s=1.0,
+        window_s=3.0,
+    )
+    plant = load_parameters(CONFIG / "platform_simulator.yaml", preset="realistic")
+    for measured, exact in zip(live.points, offline_sweep(plant, plan).points, strict=True):
+        assert measured.ok, measured.reason
+        assert measured.speed_mps == pytest.approx(exact.speed_mps, rel=LIVE_TOLERANCE)
