@@ -31,7 +31,7 @@ from pathlib import Path
 
 import rclpy
 from rclpy.context import Context
-from rclpy.executors import MultiThreadedExecutor
+from rclpy.executors import SingleThreadedExecutor
 from rclpy.qos import QoSProfile, ReliabilityPolicy
 from rosgraph_msgs.msg import Clock as ClockMessage
 from sensor_msgs.msg import Imu
@@ -97,7 +97,7 @@ def paced(seconds: float) -> list[str]:
     node.create_subscription(
         CarrierState, f"{ns}/carrier/state", lambda m: state.add(_stamp_ns(m)), RELIABLE, raw=True
     )
-    executor = MultiThreadedExecutor(num_threads=2, context=context)
+    executor = SingleThreadedExecutor(context=context)
     executor.add_node(node)
     spinner = threading.Thread(target=executor.spin, daemon=True)
     spinner.start()
@@ -150,7 +150,7 @@ def unpaced(seconds: float, batches: bool) -> str:
     node.create_subscription(
         ClockMessage, "/clock", lambda m: clocks.append(_clock_ns(m)), 100, raw=True
     )
-    executor = MultiThreadedExecutor(num_threads=2, context=context)
+    executor = SingleThreadedExecutor(context=context)
     executor.add_node(node)
     spinner = threading.Thread(target=executor.spin, daemon=True)
     spinner.start()
