@@ -33,7 +33,12 @@ import yaml
 from feeder_ros.cli.arguments import positive_int
 from feeder_ros.cli.main import CommandError
 from feeder_ros.cli.progress import ProgressBar
-from feeder_ros.cli.sim import atomic_text, default_config_path, load_parameters
+from feeder_ros.cli.sim import (
+    add_plant_arguments,
+    atomic_text,
+    default_config_path,
+    plant_from_arguments,
+)
 from feeder_ros.design.optimizer import (
     OBJECTIVES,
     DesignEvaluation,
@@ -63,7 +68,6 @@ HELP = (
 DESIGN_NAME = "design.yaml"
 #: the node key of the written parameter file (any namespace, as config/platform_simulator.yaml)
 PARAMS_FILE_NODE = "/**/platform_simulator"
-_NO_PRESET = "none"
 
 
 def _speed(text: str) -> float:
@@ -80,22 +84,8 @@ def add_arguments(parser: argparse.ArgumentParser) -> None:
     parser.add_argument(
         "--space", type=Path, metavar="YAML", help=f"design file (default: config/{DESIGN_NAME})"
     )
-    parser.add_argument(
-        "--config", type=Path, help="simulator YAML of the plant (default: platform_simulator.yaml)"
-    )
-    parser.add_argument(
-        "--preset",
-        default="realistic",
-        help="plant section platform_simulator_<PRESET> (default 'realistic', damped); "
-        f"'{_NO_PRESET}' for the undamped case study",
-    )
-    parser.add_argument(
-        "--set",
-        dest="overrides",
-        action="append",
-        default=[],
-        metavar="NAME=VALUE",
-        help="fix one plant parameter (repeatable), e.g. --set static_friction=0.3",
+    add_plant_arguments(
+        parser, "realistic", "fix one plant parameter (repeatable), e.g. --set static_friction=0.3"
     )
     parser.add_argument(
         "--objective",
@@ -140,10 +130,6 @@ def _load(args: argparse.Namespace) -> tuple[DesignConfig, FeederParameters, str
     if not space_path.is_file():
         raise CommandError(f"--space {space_path}: no such file")
     design = load_design_config(space_path)
-    plant_path = Path(args.config) if args.config is not None else default_config_path()
-    if not plant_path.is_file():
-        raise CommandError(f"--config {plant_path}: no such file")
-    preset = None if args.preset in ("", _NO_PRESET) else args.preset
     searched = set(design.space.names)
     for item in args.overrides:
         name = item.partition("=")[0].strip()
@@ -152,7 +138,7 @@ def _load(args: argparse.Namespace) -> tuple[DesignConfig, FeederParameters, str
                 f"--set {item!r}: {name} is searched (variables of {space_path}); "
                 "remove it there to fix its value"
             )
-    plant = load_parameters(plant_path, args.overrides, preset)
+    plant, plant_path, preset = plant_from_arguments(args)
     label = f"{plant_path.name}" + (f", preset {preset}" if preset else "")
     return design, plant, label
 

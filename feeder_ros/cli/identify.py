@@ -36,7 +36,12 @@ import yaml
 from feeder_ros.cli.arguments import non_negative_float, positive_float
 from feeder_ros.cli.main import CommandError
 from feeder_ros.cli.progress import ProgressBar
-from feeder_ros.cli.sim import atomic_text, default_config_path, load_parameters
+from feeder_ros.cli.sim import (
+    add_plant_arguments,
+    atomic_text,
+    default_config_path,
+    plant_from_arguments,
+)
 from feeder_ros.identification.sweep import (
     SweepDataError,
     SweepGroup,
@@ -124,23 +129,7 @@ def add_arguments(parser: argparse.ArgumentParser) -> None:
     )
     fit.add_argument("--no-fit", action="store_true", help="measure (and write) the sweep only")
     sim = parser.add_argument_group("--source sim: the plant")
-    sim.add_argument(
-        "--config", type=Path, help="simulator YAML (default: platform_simulator.yaml)"
-    )
-    sim.add_argument(
-        "--preset",
-        default="realistic",
-        help="platform_simulator_<PRESET> section (default: realistic, damped; 'none': the base "
-        "section, the paper's undamped case study)",
-    )
-    sim.add_argument(
-        "--set",
-        dest="overrides",
-        action="append",
-        default=[],
-        metavar="NAME=VALUE",
-        help="override one model parameter (repeatable)",
-    )
+    add_plant_arguments(sim, "realistic")
     live = parser.add_argument_group("--source live: the cell")
     live.add_argument("--namespace", default="", help="the feeder's namespace, e.g. /cell/feeder_1")
     live.add_argument(
@@ -257,11 +246,7 @@ def _sweep_sim(
 ) -> tuple[SweepResult, dict[str, Any]]:
     from feeder_ros.identification.offline_sweep import offline_sweep
 
-    config = Path(args.config) if args.config is not None else default_config_path()
-    if not config.is_file():
-        raise CommandError(f"--config {config}: no such file")
-    preset = None if args.preset in (None, "", "none") else str(args.preset)
-    params = load_parameters(config, args.overrides, preset)
+    params, config, preset = plant_from_arguments(args)
     bar = ProgressBar("sweeping (sim)", plan.point_count, show)
     try:
         result = offline_sweep(params, plan, progress=lambda done, total: bar.update(done))

@@ -39,9 +39,12 @@ __all__ = [
     "HELP",
     "NODE_NAME",
     "NON_MODEL_KEYS",
+    "NO_PRESET",
     "add_arguments",
+    "add_plant_arguments",
     "default_config_path",
     "load_parameters",
+    "plant_from_arguments",
     "run",
 ]
 
@@ -122,20 +125,44 @@ def load_parameters(
     return params.with_changes(**changes) if changes else params
 
 
-def add_arguments(parser: argparse.ArgumentParser) -> None:
+NO_PRESET = "none"  #: --preset value for the YAML's base section (the paper's undamped case)
+
+
+def add_plant_arguments(
+    parser: argparse.ArgumentParser | argparse._ArgumentGroup,
+    default_preset: str | None,
+    set_help: str = "override one model parameter (repeatable), e.g. --set drive_amplitude_n=40",
+) -> None:
+    """``--config``, ``--preset`` and ``--set NAME=VALUE``: the plant, as ``feeder sim`` reads it
+    (shared by every sub-command that simulates)."""
     parser.add_argument("--config", type=Path, help=f"simulator YAML (default: {CONFIG_NAME})")
+    base = (
+        f"default '{default_preset}'; '{NO_PRESET}': the base section, the paper's undamped case"
+        if default_preset
+        else "default: the base section, the paper's undamped case study"
+    )
     parser.add_argument(
         "--preset",
-        help="use the YAML's platform_simulator_<PRESET> section, e.g. 'realistic' (damped)",
+        default=default_preset,
+        help="use the YAML's platform_simulator_<PRESET> section, e.g. 'realistic' (damped); "
+        + base,
     )
     parser.add_argument(
-        "--set",
-        dest="overrides",
-        action="append",
-        default=[],
-        metavar="NAME=VALUE",
-        help="override one model parameter (repeatable), e.g. --set drive_amplitude_n=40",
+        "--set", dest="overrides", action="append", default=[], metavar="NAME=VALUE", help=set_help
     )
+
+
+def plant_from_arguments(args: argparse.Namespace) -> tuple[FeederParameters, Path, str | None]:
+    """The plant of :func:`add_plant_arguments`' options: (parameters, YAML path, preset)."""
+    config = Path(args.config) if args.config is not None else default_config_path()
+    if not config.is_file():
+        raise CommandError(f"--config {config}: no such file")
+    preset = None if args.preset in (None, "", NO_PRESET) else str(args.preset)
+    return load_parameters(config, args.overrides, preset), config, preset
+
+
+def add_arguments(parser: argparse.ArgumentParser) -> None:
+    add_plant_arguments(parser, None)
     parser.add_argument(
         "--duration", type=positive_float, default=1.0, help="simulated time in s (default 1)"
     )
@@ -287,10 +314,7 @@ def _concatenate(chunks: Sequence[SimulationResult]) -> SimulationResult:
 
 
 def run(args: argparse.Namespace) -> int:
-    config = args.config if args.config is not None else default_config_path()
-    if not Path(config).is_file():
-        raise CommandError(f"--config {config}: no such file")
-    params = load_parameters(Path(config), args.overrides, args.preset)
+    params, _, _ = plant_from_arguments(args)
     parts = default_parts(params, args.parts)
     show = bool(args.progress) or (sys.stderr.isatty() and args.duration >= 10.0)
     progress = ProgressBar("simulating", args.duration, show)
