@@ -38,7 +38,7 @@ from dataclasses import dataclass
 import numpy as np
 import numpy.typing as npt
 
-from feeder_ros.physics.parameters import FeederParameters, ParameterError
+from feeder_ros.physics.parameters import FeederParameters, ParameterError, finite_number
 from feeder_ros.physics.simulation import FeederSimulator
 
 __all__ = [
@@ -64,19 +64,6 @@ CONDITION_NAMES: tuple[str, ...] = (
 )
 
 
-def _number(name: str, value: object, *, positive: bool = False, minimum: float = 0.0) -> float:
-    if isinstance(value, bool) or not isinstance(value, int | float):
-        raise ParameterError(f"{name}={value!r} is not a number")
-    number = float(value)
-    if not math.isfinite(number):
-        raise ParameterError(f"{name}={value!r} is not finite")
-    if positive and number <= 0.0:
-        raise ParameterError(f"{name}={value!r} must be > 0")
-    if number < minimum:
-        raise ParameterError(f"{name}={value!r} must be >= {minimum:g}")
-    return number
-
-
 @dataclass(frozen=True)
 class EvaluationWindow:
     """When a design is measured: after ``settle_s`` (start-up transient), for ``window_s``.
@@ -89,9 +76,13 @@ class EvaluationWindow:
     margin_rate_hz: float = 20000.0
 
     def __post_init__(self) -> None:
-        object.__setattr__(self, "settle_s", _number("settle_s", self.settle_s))
-        object.__setattr__(self, "window_s", _number("window_s", self.window_s, positive=True))
-        rate = _number("margin_rate_hz", self.margin_rate_hz, positive=True)
+        object.__setattr__(
+            self, "settle_s", finite_number("settle_s", self.settle_s, nonnegative=True)
+        )
+        object.__setattr__(
+            self, "window_s", finite_number("window_s", self.window_s, positive=True)
+        )
+        rate = finite_number("margin_rate_hz", self.margin_rate_hz, positive=True)
         if rate * self.window_s < 10.0:
             raise ParameterError(
                 f"margin_rate_hz={self.margin_rate_hz!r} gives fewer than 10 samples in "
@@ -116,15 +107,15 @@ class ConditionLimits:
     max_stroke_m: float = 0.005
 
     def __post_init__(self) -> None:
-        margin = _number("required_margin", self.required_margin)
+        margin = finite_number("required_margin", self.required_margin, nonnegative=True)
         if margin >= 1.0:
             raise ParameterError(f"required_margin={self.required_margin!r} must be < 1")
         object.__setattr__(self, "required_margin", margin)
-        ratio = _number("min_stiffness_ratio", self.min_stiffness_ratio, positive=True)
+        ratio = finite_number("min_stiffness_ratio", self.min_stiffness_ratio, positive=True)
         object.__setattr__(self, "min_stiffness_ratio", ratio)
-        slender = _number("min_slenderness", self.min_slenderness, positive=True)
+        slender = finite_number("min_slenderness", self.min_slenderness, positive=True)
         object.__setattr__(self, "min_slenderness", slender)
-        stroke = _number("max_stroke_m", self.max_stroke_m, positive=True)
+        stroke = finite_number("max_stroke_m", self.max_stroke_m, positive=True)
         object.__setattr__(self, "max_stroke_m", stroke)
 
 

@@ -11,17 +11,36 @@ from collections.abc import Mapping
 from dataclasses import dataclass, fields, replace
 from typing import Any, Final
 
+import numpy as np
+
 __all__ = [
     "PARAMETER_SPECS",
     "FeederParameters",
     "ParameterError",
     "ParameterSpec",
+    "finite_number",
     "parse_parameter_value",
 ]
 
 
 class ParameterError(ValueError):
     """A parameter name or value that the model cannot accept; the message names the value."""
+
+
+def finite_number(
+    name: str, value: object, *, positive: bool = False, nonnegative: bool = False
+) -> float:
+    """``value`` as a finite float; ParameterError naming ``name`` and the value otherwise."""
+    if isinstance(value, bool) or not isinstance(value, int | float | np.floating | np.integer):
+        raise ParameterError(f"{name}={value!r} is not a number")
+    number = float(value)
+    if not math.isfinite(number):
+        raise ParameterError(f"{name}={value!r} is not finite")
+    if positive and number <= 0.0:
+        raise ParameterError(f"{name}={value!r} must be > 0")
+    if nonnegative and number < 0.0:
+        raise ParameterError(f"{name}={value!r} must be >= 0")
+    return number
 
 
 @dataclass(frozen=True)

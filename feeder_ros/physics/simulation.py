@@ -58,6 +58,7 @@ import numpy.typing as npt
 from feeder_ros.physics import sharp_solver as _k
 from feeder_ros.physics.drive import DriveChange, DriveSchedule
 from feeder_ros.physics.parameters import FeederParameters, ParameterError
+from feeder_ros.physics.parameters import finite_number as _finite
 
 __all__ = [
     "EventKind",
@@ -105,21 +106,6 @@ class EventKind(enum.IntEnum):
 
 class SimulationError(RuntimeError):
     """The solver could not continue; the message says why and where."""
-
-
-def _finite(
-    name: str, value: object, *, positive: bool = False, nonnegative: bool = False
-) -> float:
-    if isinstance(value, bool) or not isinstance(value, int | float | np.floating | np.integer):
-        raise ParameterError(f"{name}={value!r} is not a number")
-    number = float(value)
-    if not math.isfinite(number):
-        raise ParameterError(f"{name}={value!r} is not finite")
-    if positive and number <= 0.0:
-        raise ParameterError(f"{name}={value!r} must be > 0")
-    if nonnegative and number < 0.0:
-        raise ParameterError(f"{name}={value!r} must be >= 0")
-    return number
 
 
 @dataclass(frozen=True)
