@@ -101,8 +101,14 @@ def test_sim_sweep_is_fitted_and_written(
     refit = json.loads((again / "fit.json").read_text())
     assert refit["source"].startswith("csv ")
     assert refit["plan"] is None
-    assert refit["groups"][0]["model"] == group["model"]
-    assert refit["groups"][0]["fit_percent"] == group["fit_percent"]
+    # the same models: equal responses over the band (a zero far above the band is only a gain,
+    # and how the fit splits gain and zero there is round-off)
+    band = np.linspace(19.0, 27.5, 200)
+    first = RationalModel.from_dict(group["model"])
+    second = RationalModel.from_dict(refit["groups"][0]["model"])
+    assert second.order == first.order
+    np.testing.assert_allclose(second.magnitude(band), first.magnitude(band), rtol=1e-6)
+    assert refit["groups"][0]["fit_percent"] == pytest.approx(group["fit_percent"], abs=1e-6)
 
 
 def test_the_default_plan_file_is_found() -> None:
