@@ -25,8 +25,11 @@ BIN = Path(sys.executable).parent
 CONFIG = REPO / "config"
 RELIABLE = QoSProfile(depth=1000, reliability=ReliabilityPolicy.RELIABLE)
 #: live transits against the exact offline mean speed: edge timing on 20 ms state samples (linear
-#: interpolation), the part's back-and-forth within a cycle, a few transits per point
-LIVE_TOLERANCE = 0.08
+#: interpolation), the part's back-and-forth within a cycle, a few transits per point. A part
+#: crosses the 1 cm between the sensors in about 13 drive cycles, advancing in one burst per
+#: cycle, so a single transit time is only good to about 1/13 (8 %); measured spread over repeated
+#: runs: -6.9 .. +5.1 %
+LIVE_TOLERANCE = 0.12
 
 
 # --------------------------------------------------------------------------------- meters
@@ -195,7 +198,7 @@ def test_live_sweep_on_the_cells_clock_with_a_simulator_faster_than_real_time(
     out = tmp_path / "clocked"
     with running(simulator), running([*DRIVE, *sim_time]), running([*MONITOR, *sim_time]):
         sweep = subprocess.run(
-            [*SWEEP, "--use-sim-time", "--frequencies", "20:21:1", "--window", "3",
+            [*SWEEP, "--use-sim-time", "--frequencies", "20:21:1", "--window", "6",
              "--output", str(out)],
             capture_output=True, text=True, timeout=180,
         )  # fmt: skip
@@ -207,7 +210,7 @@ def test_live_sweep_on_the_cells_clock_with_a_simulator_faster_than_real_time(
         amplitudes_percent=(40.0,),
         part_masses_kg=(0.05,),
         settle_s=1.0,
-        window_s=3.0,
+        window_s=6.0,  # sensor transits: parts advance in bursts, a longer window averages more
     )
     plant = load_parameters(CONFIG / "platform_simulator.yaml", preset="realistic")
     for measured, exact in zip(live.points, offline_sweep(plant, plan).points, strict=True):
