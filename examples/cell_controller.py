@@ -130,6 +130,18 @@ class CellController(Node):
         self.log(name, success=answer.success, message=answer.message)
         return bool(answer.success)
 
+    def start(self, wait_s: float = 10.0) -> bool:
+        """``start``; while the drive interface has not heard our heartbeat yet (just after
+        start-up the topic is still being discovered) it refuses, so ask again for a while."""
+        deadline = time.monotonic() + wait_s
+        while True:
+            answer = self.call(Trigger, "start", Trigger.Request())
+            unheard = not answer.success and "send heartbeats first" in answer.message
+            if not unheard or time.monotonic() > deadline:
+                self.log("start", success=answer.success, message=answer.message)
+                return bool(answer.success)
+            time.sleep(0.2)
+
     def target_speed(self, speed_mps: float) -> bool:
         answer = self.call(
             SetTargetSpeed, "set_target_speed", SetTargetSpeed.Request(speed_mps=speed_mps)
@@ -176,7 +188,7 @@ class CellController(Node):
         if not self.wait_for("drive state", lambda: self.drive_state is not None, 30.0):
             return 1
         self.target_speed(first_mps)
-        self.trigger("start")
+        self.start()
         self.watch_speed(hold_s)
         self.target_speed(second_mps)
         self.watch_speed(hold_s)
@@ -192,7 +204,7 @@ class CellController(Node):
         self.log("heartbeat resumed")
         time.sleep(0.5)
         self.trigger("reset_fault")
-        self.trigger("start")
+        self.start()
         self.watch_speed(hold_s)
         self.trigger("stop")
         stopped = self.wait_for("stop", lambda: self.state_name() == "idle", 30.0)
