@@ -821,6 +821,8 @@ class VehicleEstimator:
                 self._cumulative_at("slip_valid", t_end)
                 - self._cumulative_at("slip_valid", w_start)
             ) / tv
+            # a difference of running totals over their own span: round-off can leave [0, 1]
+            slip_frac = min(max(slip_frac, 0.0), 1.0)
             coverage = min(1.0, tv / cfg.window_s)
             q_speed = q * self._q_speed * coverage
             q_slip = q * self._q_slip * coverage

@@ -386,3 +386,18 @@ def test_amplitude_change_without_command_is_detected() -> None:
     assert final.status == Status.OK
     true_speed = _true_mean_speed(sim, final.t_s - WINDOW_S, final.t_s)
     assert final.mean_speed_mps == pytest.approx(true_speed, rel=0.03)
+
+
+def test_a_part_that_always_slips_has_a_slip_fraction_of_one_not_more(
+    steady: SimulationResult,
+) -> None:
+    """Nearly frictionless nominal part: it slips the whole window. The window's slip fraction is
+    a difference of running totals, so round-off could push it past 1; it is a fraction."""
+    slippery = PartModel(static_friction=0.002, kinetic_friction=0.001)
+    est = VehicleEstimator(EstimatorConfig(part=slippery, window_s=WINDOW_S))
+    est.set_drive(PARAMS.drive_frequency_hz, PARAMS.drive_amplitude_n, 0.0)
+    run = _feed(est, steady.t_s, _noisy(steady))
+    fractions = [r.slip_fraction for r in run.records if math.isfinite(r.slip_fraction)]
+    assert fractions
+    assert all(0.0 <= f <= 1.0 for f in fractions)
+    assert run.records[-1].slip_fraction == pytest.approx(1.0, abs=1e-3)
