@@ -165,6 +165,9 @@ def _spin_composed(
         while deadline is None or time.monotonic() < deadline:
             executor.spin_once(timeout_sec=0.1)
     finally:
+        # wait for callbacks in flight and end the executor's worker threads (left running, they
+        # are joined at interpreter exit, and one stuck in a callback kept the process alive)
+        executor.shutdown(timeout_sec=5.0)
         for node in nodes:
             executor.remove_node(node)
             node.destroy_node()
