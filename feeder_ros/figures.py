@@ -2,13 +2,12 @@
 
 from __future__ import annotations
 
-import contextlib
-import os
-import tempfile
 from pathlib import Path
 
 from matplotlib.backends.backend_agg import FigureCanvasAgg
 from matplotlib.figure import Figure
+
+from feeder_ros.atomic_files import atomic_path
 
 __all__ = ["save_figure"]
 
@@ -17,14 +16,6 @@ def save_figure(figure: Figure, path: Path) -> Path:
     """Write ``figure`` as PNG to ``path`` through a temporary file beside it and a rename."""
     path = Path(path)
     FigureCanvasAgg(figure)
-    fd, temp = tempfile.mkstemp(prefix=f".{path.name}.", suffix=".png", dir=path.parent or ".")
-    os.close(fd)
-    try:
-        figure.savefig(temp, dpi=110)
-        os.chmod(temp, 0o644)
-        os.replace(temp, path)
-    except BaseException:
-        with contextlib.suppress(OSError):
-            os.unlink(temp)
-        raise
+    with atomic_path(path, ".png") as temporary:
+        figure.savefig(temporary, dpi=110, format="png")
     return path

@@ -203,7 +203,7 @@ def test_bag_source(tmp_path: Path, capsys: pytest.CaptureFixture[str]) -> None:
 def test_an_order_the_hold_out_cannot_score_is_left_out_not_the_whole_curve() -> None:
     """5 frequencies: order 0/1 can be scored on held-out pairs, 0/2 needs 6 (runs of 2 held out
     per fold): 0/2 is left out with the reason and the curve is still fitted."""
-    from feeder_ros.cli.identify import FitSettings, fit_group
+    from feeder_ros.identification.group_fit import FitSettings, fit_group
     from feeder_ros.identification.sweep import SweepGroup
 
     f = np.array([19.0, 20.0, 21.0, 22.0, 23.0])

@@ -3,14 +3,13 @@
 from __future__ import annotations
 
 import csv
-import os
 from pathlib import Path
 
 import numpy as np
 import pytest
 
 from feeder_ros.cli.main import main
-from feeder_ros.cli.sim import atomic_text, default_config_path, load_parameters
+from feeder_ros.cli.sim import default_config_path, load_parameters
 from feeder_ros.physics.parameters import FeederParameters
 from feeder_ros.physics.simulation import EventKind, PartSpec, simulate
 
@@ -147,24 +146,3 @@ def test_bad_options_are_refused(capsys: pytest.CaptureFixture[str]) -> None:
             main(["sim", *option])
         assert exit_info.value.code == 2
         assert option[1] in capsys.readouterr().err
-
-
-def test_outputs_are_never_half_written(tmp_path: Path) -> None:
-    target = tmp_path / "out.csv"
-    target.write_text("old\n")
-
-    def interrupted_write() -> None:
-        with atomic_text(target) as stream:
-            stream.write("partial")
-            raise RuntimeError("simulated failure while writing")
-
-    with pytest.raises(RuntimeError, match="simulated failure"):
-        interrupted_write()
-    assert target.read_text() == "old\n"
-    assert sorted(p.name for p in tmp_path.iterdir()) == ["out.csv"]
-    with atomic_text(target) as stream:
-        stream.write("new\n")
-    assert target.read_text() == "new\n"
-    umask = os.umask(0)
-    os.umask(umask)
-    assert target.stat().st_mode & 0o777 == 0o666 & ~umask  # not mkstemp's 0600

@@ -9,12 +9,11 @@ import html
 import io
 import json
 import math
-import os
-import tempfile
 from collections.abc import Sequence
 from pathlib import Path
 from typing import Any
 
+from feeder_ros.atomic_files import atomic_bytes
 from feeder_ros.bag.analysis import BagAnalysis
 
 __all__ = ["comparison_rows", "format_summary", "segment_rows", "write_outputs"]
@@ -179,18 +178,6 @@ def format_summary(analyses: Sequence[BagAnalysis]) -> str:
 # ------------------------------------------------------------------------------ files
 
 
-def _atomic_write(path: Path, data: bytes) -> None:
-    fd, temp = tempfile.mkstemp(prefix=f".{path.name}.", dir=path.parent)
-    try:
-        with os.fdopen(fd, "wb") as stream:
-            stream.write(data)
-        os.chmod(temp, 0o644)
-        os.replace(temp, path)
-    except BaseException:
-        Path(temp).unlink(missing_ok=True)
-        raise
-
-
 def _csv(rows: Sequence[dict[str, Any]], columns: Sequence[str] | None = None) -> bytes:
     buffer = io.StringIO()
     names = list(columns if columns is not None else (rows[0].keys() if rows else []))
@@ -311,7 +298,7 @@ def write_outputs(analyses: Sequence[BagAnalysis], directory: Path) -> list[Path
 
     def put(name: str, data: bytes) -> None:
         path = directory / name
-        _atomic_write(path, data)
+        atomic_bytes(path, data)
         written.append(path)
 
     sections: list[str] = []

@@ -22,12 +22,8 @@ the speed model file the drive interface loads for its target-speed mode.
 from __future__ import annotations
 
 import argparse
-import json
-import math
 import sys
 import time
-from collections.abc import Sequence
-from dataclasses import dataclass, field
 from pathlib import Path
 from typing import TYPE_CHECKING, Any
 
@@ -36,25 +32,19 @@ import yaml
 from feeder_ros.cli.arguments import non_negative_float, positive_float
 from feeder_ros.cli.main import CommandError
 from feeder_ros.cli.progress import ProgressBar
-from feeder_ros.cli.sim import (
-    add_plant_arguments,
-    atomic_text,
-    default_config_path,
-    plant_from_arguments,
-)
+from feeder_ros.cli.sim import add_plant_arguments, default_config_path, plant_from_arguments
+from feeder_ros.identification.group_fit import DEFAULT_FOLDS, FitSettings, GroupFit, fit_group
+from feeder_ros.identification.report import fit_json, summary, write_model_file, write_outputs
 from feeder_ros.identification.sweep import (
-    SweepDataError,
-    SweepGroup,
     SweepPlan,
     SweepPlanError,
     SweepResult,
-    check_fit_data,
     parse_orders,
     parse_values,
 )
 
 if TYPE_CHECKING:
-    from feeder_ros.identification.rational_fit import OrderScore
+    pass
 
 __all__ = ["HELP", "PLAN_NAME", "add_arguments", "default_plan_path", "run"]
 
@@ -63,9 +53,6 @@ PLAN_NAME = "identify.yaml"
 SOURCES = ("sim", "live", "bag", "csv")
 MEASURES = ("sensors", "monitor", "truth")
 DEFAULT_ORDERS = "0/2, 1/2, 1/3, 1/4, 2/4"
-DEFAULT_FOLDS = 5
-#: the paper's fit for its 31 g vehicle (Eq. 24), for the summary
-PAPER_FIT_PERCENT = 63.0
 
 
 def default_plan_path() -> Path:
@@ -158,13 +145,6 @@ def add_arguments(parser: argparse.ArgumentParser) -> None:
 
 
 # --------------------------------------------------------------------------------------- plan
-
-
-@dataclass(frozen=True)
-class FitSettings:
-    orders: tuple[tuple[int, int], ...]
-    min_speed_mps: float = 0.0
-    folds: int = DEFAULT_FOLDS
 
 
 def load_plan(args: argparse.Namespace) -> tuple[SweepPlan, FitSettings]:
@@ -331,269 +311,6 @@ def _sweep_csv(args: argparse.Namespace) -> SweepResult:
     if len(args.inputs) != 1:
         raise CommandError("--source csv: give exactly one sweep CSV")
     return SweepResult.read_csv(args.inputs[0])
-
-
-# ---------------------------------------------------------------------------------------- fit
-
-
-@dataclass
-class GroupFit:
-    """The outcome for one (amplitude, mass) curve: the chosen order's scores, or why not."""
-
-    group: SweepGroup
-    scores: list[OrderScore] = field(default_factory=list)
-    best: OrderScore | None = None
-    peak_hz: float = math.nan
-    left_out: list[str] = field(default_factory=list)
-    error: str = ""
-
-    @property
-    def key(self) -> tuple[float, float]:
-        return (self.group.amplitude_percent, self.group.part_mass_kg)
-
-
-def fit_group(group: SweepGroup, settings: FitSettings) -> GroupFit:
-    from feeder_ros.identification.rational_fit import (
-        IdentificationError,
-        best_order,
-        compare_orders,
-        min_distinct_frequencies,
-    )
-
-    def need(zeros: int, poles: int) -> int:  # the hold-out scheme of compare_orders decides
-        return min_distinct_frequencies(zeros, poles, settings.folds)
-
-    outcome = GroupFit(group)
-    try:
-        check_fit_data(
-            group.frequency_hz,
-            group.speed_mps,
-            min(need(z, p) for z, p in settings.orders),
-            what=group.label,
-        )
-    except SweepDataError as error:
-        outcome.error = str(error)
-        return outcome
-    distinct = len(set(group.frequency_hz.tolist()))
-    orders = []
-    for zeros, poles in settings.orders:
-        needed = need(zeros, poles)
-        if distinct < needed:
-            outcome.left_out.append(
-                f"order {zeros}/{poles} needs {needed} frequencies for the hold-out check, "
-                f"{distinct} usable"
-            )
-        else:
-            orders.append((zeros, poles))
-    try:
-        outcome.scores = compare_orders(
-            group.frequency_hz, group.speed_mps, group.amplitude_n, orders, folds=settings.folds
-        )
-        outcome.best = best_order(outcome.scores)
-        lo, hi = float(group.frequency_hz.min()), float(group.frequency_hz.max())
-        outcome.peak_hz = outcome.best.fit.model.peak_frequency_hz(lo, hi)
-    except IdentificationError as error:
-        outcome.error = f"{group.label}: {error}"
-    return outcome
-
-
-def _complex_pairs(values: Sequence[complex]) -> list[list[float]]:
-    return [[float(v.real), float(v.imag)] for v in values]
-
-
-def _pole_table(poles: Sequence[complex]) -> list[dict[str, float]]:
-    """Each pole as natural frequency |p|/2 pi [Hz] and damping ratio -Re p / |p|."""
-    return [
-        {"natural_frequency_hz": abs(p) / (2.0 * math.pi), "damping_ratio": -p.real / abs(p)}
-        for p in poles
-        if p.imag >= 0.0 and abs(p) > 0.0
-    ]
-
-
-def fit_json(
-    result: SweepResult,
-    fits: Sequence[GroupFit],
-    plan: SweepPlan | None,
-    settings: FitSettings,
-    plant: dict[str, Any] | None,
-) -> dict[str, Any]:
-    groups = []
-    for fit in fits:
-        g = fit.group
-        entry: dict[str, Any] = {
-            "amplitude_percent": g.amplitude_percent,
-            "amplitude_n": g.amplitude_n,
-            "part_mass_kg": g.part_mass_kg,
-            "points": int(g.frequency_hz.size),
-            "excluded": dict(g.excluded),
-            "frequency_range_hz": [float(g.frequency_hz.min()), float(g.frequency_hz.max())]
-            if g.frequency_hz.size
-            else None,
-            "measured_peak_hz": float(g.frequency_hz[g.speed_mps.argmax()])
-            if g.frequency_hz.size
-            else None,
-            "measured_peak_speed_mps": float(g.speed_mps.max()) if g.speed_mps.size else None,
-            "error": fit.error or None,
-            "orders_left_out": fit.left_out,
-            "orders": [
-                {
-                    "zeros": s.zeros,
-                    "poles": s.poles,
-                    "parameters": s.parameters,
-                    "fit_percent": s.fit_percent,
-                    "holdout_fit_percent": s.holdout_fit_percent,
-                }
-                for s in fit.scores
-            ],
-        }
-        if fit.best is not None:
-            model = fit.best.fit.model
-            entry.update(
-                chosen_order={"zeros": fit.best.zeros, "poles": fit.best.poles},
-                gain=model.gain,
-                zeros=_complex_pairs(model.zeros),
-                poles=_complex_pairs(model.poles),
-                poles_hz=_pole_table(model.poles),
-                fit_percent=fit.best.fit_percent,
-                holdout_fit_percent=fit.best.holdout_fit_percent,
-                residual_rms_mps=fit.best.fit.residual_rms_mps,
-                peak_frequency_hz=fit.peak_hz,
-                model=model.to_dict(),
-            )
-        groups.append(entry)
-    return {
-        "source": result.source,
-        "points": len(result),
-        "points_ok": result.ok_count,
-        "full_scale_force_n": result.full_scale_force_n,
-        "plan": None if plan is None else plan.as_dict(),
-        "plant": plant,
-        "fit": {
-            "orders": [list(o) for o in settings.orders],
-            "min_speed_mps": settings.min_speed_mps,
-            "folds": settings.folds,
-            "criterion": "Eq. 23 on magnitudes, unit weights; fit % = NRMSE fit "
-            "100*(1 - |v - v_hat| / |v - mean v|); order chosen by hold-out fit "
-            "(interleaved folds over frequency), ties within 1 point to fewer parameters",
-        },
-        "paper_fit_percent": PAPER_FIT_PERCENT,
-        "groups": groups,
-    }
-
-
-def _json_safe(value: Any) -> Any:
-    """NaN/inf become null (JSON has neither)."""
-    if isinstance(value, float):
-        return value if math.isfinite(value) else None
-    if isinstance(value, dict):
-        return {k: _json_safe(v) for k, v in value.items()}
-    if isinstance(value, list | tuple):
-        return [_json_safe(v) for v in value]
-    return value
-
-
-def write_model_file(path: Path, result: SweepResult, fits: Sequence[GroupFit]) -> int:
-    from feeder_ros.identification.speed_model_file import (
-        ModelEntry,
-        SpeedModelFile,
-        save_speed_model,
-    )
-
-    entries = []
-    for fit in fits:
-        if fit.best is None:
-            continue
-        g = fit.group
-        entries.append(
-            ModelEntry(
-                amplitude_percent=g.amplitude_percent,
-                amplitude_n=g.amplitude_n,
-                part_mass_kg=g.part_mass_kg,
-                frequency_range_hz=(float(g.frequency_hz.min()), float(g.frequency_hz.max())),
-                fit_percent=fit.best.fit_percent,
-                model=fit.best.fit.model,
-            )
-        )
-    if not entries:
-        raise CommandError(f"--model-out {path}: no fitted model to write")
-    full_scale = result.full_scale_force_n
-    if not math.isfinite(full_scale):
-        raise CommandError(f"--model-out {path}: the sweep gives no drive full scale")
-    save_speed_model(
-        path, SpeedModelFile(full_scale, tuple(entries), f"feeder identify ({result.source})")
-    )
-    return len(entries)
-
-
-# -------------------------------------------------------------------------------------- output
-
-
-def summary(result: SweepResult, fits: Sequence[GroupFit], wall_s: float) -> str:
-    lines = [
-        f"sweep: {len(result)} points, {result.ok_count} usable, source {result.source} "
-        f"({wall_s:.1f} s)"
-    ]
-    if not fits:
-        return "\n".join(lines)
-    header = (
-        f"{'amplitude':>9} {'mass':>6} {'points':>6} {'order':>5} {'fit %':>6} {'hold-out %':>10} "
-        f"{'peak Hz':>8} {'data peak':>9}  poles (natural Hz / damping)"
-    )
-    lines += [header, "-" * len(header)]
-    for fit in fits:
-        g = fit.group
-        head = f"{g.amplitude_percent:>7g} % {g.part_mass_kg * 1e3:>4g} g {g.frequency_hz.size:>6d}"
-        if fit.best is None:
-            lines.append(f"{head}  not fitted: {fit.error}")
-            continue
-        best = fit.best
-        data_peak = float(g.frequency_hz[g.speed_mps.argmax()])
-        poles = ", ".join(
-            f"{p['natural_frequency_hz']:.2f}/{p['damping_ratio']:.3f}"
-            for p in _pole_table(best.fit.model.poles)
-        )
-        lines.append(
-            f"{head} {best.zeros:>3d}/{best.poles:<1d} {best.fit_percent:>6.1f} "
-            f"{best.holdout_fit_percent:>10.1f} {fit.peak_hz:>8.2f} {data_peak:>9.2f}  {poles}"
-        )
-    fitted = [f.best.fit_percent for f in fits if f.best is not None]
-    if fitted:
-        lines.append(
-            f"fit % from {min(fitted):.1f} to {max(fitted):.1f} (the paper: "
-            f"{PAPER_FIT_PERCENT:g} % and 50 % on its feeder)"
-        )
-    for fit in fits:
-        for note in fit.left_out:
-            lines.append(f"note: {fit.group.label}: {note}")
-    return "\n".join(lines)
-
-
-def write_outputs(
-    directory: Path,
-    result: SweepResult,
-    fits: Sequence[GroupFit],
-    document: dict[str, Any] | None,
-) -> list[Path]:
-    from feeder_ros.identification.plots import plot_bode_magnitude, plot_speed_sweep
-
-    directory.mkdir(parents=True, exist_ok=True)
-    written = []
-    with atomic_text(directory / "sweep.csv") as stream:
-        result.write_csv(stream)
-    written.append(directory / "sweep.csv")
-    if result.ok_count:
-        written.append(plot_speed_sweep(result, directory / "fig9.png"))
-    if document is not None:
-        with atomic_text(directory / "fit.json") as stream:
-            json.dump(_json_safe(document), stream, indent=2)
-            stream.write("\n")
-        written.append(directory / "fit.json")
-        models = {f.key: f.best.fit.model for f in fits if f.best is not None}
-        peaks = {f.key: f.peak_hz for f in fits if f.best is not None}
-        groups = [f.group for f in fits if f.group.frequency_hz.size]
-        if groups:
-            written.append(plot_bode_magnitude(groups, models, directory / "fig10.png", peaks))
-    return written
 
 
 def run(args: argparse.Namespace) -> int:

@@ -10,21 +10,19 @@ renamed, so a failed or interrupted run never leaves a half-written file.
 from __future__ import annotations
 
 import argparse
-import contextlib
 import csv
 import io
 import math
-import os
 import sys
-import tempfile
 import time
-from collections.abc import Iterator, Mapping, Sequence
+from collections.abc import Mapping, Sequence
 from pathlib import Path
 from typing import TYPE_CHECKING, Any, TextIO
 
 import numpy as np
 import yaml
 
+from feeder_ros.atomic_files import atomic_text
 from feeder_ros.cli.arguments import non_negative_int, positive_float
 from feeder_ros.cli.main import CommandError
 from feeder_ros.cli.progress import ProgressBar
@@ -181,27 +179,6 @@ def add_arguments(parser: argparse.ArgumentParser) -> None:
     parser.add_argument(
         "--progress", action="store_true", help="show a progress bar even if stderr is not a TTY"
     )
-
-
-@contextlib.contextmanager
-def atomic_text(path: Path) -> Iterator[TextIO]:
-    """A text file that appears at ``path`` only if the block completes (temp file + rename)."""
-    path = Path(path)
-    directory = path.parent if str(path.parent) else Path(".")
-    if not directory.is_dir():
-        raise CommandError(f"{path}: directory {directory} does not exist")
-    fd, temp = tempfile.mkstemp(prefix=f".{path.name}.", suffix=".tmp", dir=directory)
-    try:
-        with os.fdopen(fd, "w", encoding="utf-8", newline="") as stream:
-            yield stream
-        umask = os.umask(0)
-        os.umask(umask)
-        os.chmod(temp, 0o666 & ~umask)  # mkstemp creates 0600; give the file the usual mode
-        os.replace(temp, path)
-    except BaseException:
-        with contextlib.suppress(OSError):
-            os.unlink(temp)
-        raise
 
 
 def samples_header(n_parts: int) -> list[str]:

@@ -19,6 +19,7 @@ from typing import Protocol
 import numpy as np
 import numpy.typing as npt
 
+from feeder_ros.atomic_files import atomic_path
 from feeder_ros.drive.limits import DriveLimits
 from feeder_ros.physics.parameters import FeederParameters
 from feeder_ros.physics.simulation import PartSpec, simulate_many
@@ -209,12 +210,11 @@ def cached_speed_table(
             pass  # damaged: recompute below
     model = compute_speed_table(plant, limits, frequency_steps, amplitude_steps, duration_s)
     path.parent.mkdir(parents=True, exist_ok=True)
-    temporary = path.with_suffix(f".{os.getpid()}.tmp.npz")
-    np.savez(
-        temporary,
-        frequencies_hz=model.frequencies_hz,
-        amplitudes_percent=model.amplitudes_percent,
-        speeds_mps=model.speeds_mps,
-    )
-    os.replace(temporary, path)  # atomic: concurrent nodes never read half a file
+    with atomic_path(path, ".npz") as temporary:  # concurrent nodes never read half a file
+        np.savez(
+            temporary,
+            frequencies_hz=model.frequencies_hz,
+            amplitudes_percent=model.amplitudes_percent,
+            speeds_mps=model.speeds_mps,
+        )
     return model, path, False

@@ -23,10 +23,7 @@ The drive interface turns it into a :class:`~feeder_ros.drive.speed_model.TableS
 
 from __future__ import annotations
 
-import contextlib
 import math
-import os
-import tempfile
 from collections.abc import Mapping
 from dataclasses import dataclass
 from pathlib import Path
@@ -35,6 +32,7 @@ from typing import Any, Final
 import numpy as np
 import yaml
 
+from feeder_ros.atomic_files import atomic_text
 from feeder_ros.drive.limits import DriveLimits
 from feeder_ros.drive.speed_model import TableSpeedModel
 from feeder_ros.identification.rational_fit import (
@@ -296,20 +294,8 @@ def save_speed_model(path: Path, model_file: SpeedModelFile) -> None:
             f"{path}: not saved, the model does not validate: {exc}"
         ) from None
     path.parent.mkdir(parents=True, exist_ok=True)
-    descriptor, temporary = tempfile.mkstemp(
-        prefix=f".{path.name}.", suffix=".tmp", dir=path.parent
-    )
-    try:
-        with os.fdopen(descriptor, "w", encoding="utf-8") as handle:
-            handle.write(text)
-            handle.flush()
-            os.fsync(handle.fileno())
-        os.chmod(temporary, 0o644)
-        os.replace(temporary, path)
-    except BaseException:
-        with contextlib.suppress(FileNotFoundError):
-            os.unlink(temporary)
-        raise
+    with atomic_text(path, durable=True) as handle:
+        handle.write(text)
 
 
 # --------------------------------------------------------------------------- the speed table
