@@ -5,6 +5,11 @@ high-rate streams) and, when available, the drive command go into the ROS-free
 :class:`~feeder_ros.estimation.vehicle_estimator.VehicleEstimator`; its records come out as
 ``feeder_ros/VehicleEstimate`` on ``estimate`` at ``publish_rate_hz`` and as ``/diagnostics``.
 Callbacks only queue samples; the estimation runs in the publish timer, in batches.
+
+Without a drive command the drive frequency is taken from the accelerometer spectrum, searched
+between ``min_drive_frequency_hz`` and ``max_drive_frequency_hz``. A carrier that answers at a
+subharmonic (a period of several drive periods) can have its strongest line below the drive
+frequency, so set the band to the drive's frequency range.
 """
 
 from __future__ import annotations
@@ -33,7 +38,12 @@ from feeder_ros.msg import AccelerometerBatch, CarrierState, DriveCommand, Vehic
 from feeder_ros.node_interfaces import NodeInterface, TopicSpec
 from feeder_ros.nodes.ros_parameters import declare_parameters, validator
 from feeder_ros.nodes.runner import run_node
-from feeder_ros.physics.parameters import PARAMETER_SPECS, FeederParameters, ParameterSpec
+from feeder_ros.physics.parameters import (
+    PARAMETER_SPECS,
+    FeederParameters,
+    ParameterError,
+    ParameterSpec,
+)
 
 _AXES = ("x", "y", "z")
 _PART_PARAMETERS = ("static_friction", "kinetic_friction", "groove_angle_deg", "gravity_mps2")
@@ -53,6 +63,26 @@ PARAMETERS: dict[str, ParameterSpec] = {
             ),
             ParameterSpec(
                 "max_bridge_s", float, "s", "gaps up to this long are bridged by the model", 0.0
+            ),
+            # the band the drive line is sought in without a drive command: a carrier answering
+            # at a subharmonic (period of 2-4 drive periods) has its strongest line below the
+            # drive frequency, so the band should be the drive's range (live: a change restarts
+            # the estimator, as the window parameters do)
+            ParameterSpec(
+                "min_drive_frequency_hz",
+                float,
+                "Hz",
+                "lower end of the drive frequency search band when no drive command is received",
+                0.1,
+                10000.0,
+            ),
+            ParameterSpec(
+                "max_drive_frequency_hz",
+                float,
+                "Hz",
+                "upper end of the drive frequency search band when no drive command is received",
+                0.1,
+                10000.0,
             ),
             ParameterSpec(
                 "publish_rate_hz", float, "Hz", "estimate publish rate", 0.5, 200.0, read_only=True
@@ -89,6 +119,8 @@ DEFAULTS: dict[str, Any] = {
     "fit_window_s": 1.0,
     "max_harmonic_hz": 450.0,
     "max_bridge_s": 0.25,
+    "min_drive_frequency_hz": EstimatorConfig.frequency_band_hz[0],
+    "max_drive_frequency_hz": EstimatorConfig.frequency_band_hz[1],
     "publish_rate_hz": 20.0,
     "imu_axis": "x",
     "use_carrier_state": False,
@@ -179,6 +211,11 @@ def _seconds(stamp: Any) -> float:
 
 
 def _check_combination(values: dict[str, Any]) -> None:
+    low, high = values["min_drive_frequency_hz"], values["max_drive_frequency_hz"]
+    if low >= high:
+        raise ParameterError(
+            f"min_drive_frequency_hz={low:g} Hz must be below max_drive_frequency_hz={high:g} Hz"
+        )
     _build_estimator(values)
 
 
@@ -196,6 +233,7 @@ def _build_estimator(values: dict[str, Any]) -> VehicleEstimator:
         min_fit_s=min(0.3, fit_window),
         max_harmonic_hz=values["max_harmonic_hz"],
         max_bridge_s=values["max_bridge_s"],
+        frequency_band_hz=(values["min_drive_frequency_hz"], values["max_drive_frequency_hz"]),
         batch_interval_s=0.0,  # the node already batches per publish period
     )
     return VehicleEstimator(config)
@@ -211,6 +249,9 @@ class VehicleEstimatorNode(Node):
         )
         self.add_post_set_parameters_callback(self._apply_parameters)
         self._lock = threading.Lock()
+        #: the last accepted drive command (frequency [Hz], amplitude, stamp [s]): a rebuilt
+        #: estimator (a parameter change) starts with it instead of searching for the frequency
+        self._drive: tuple[float, float, float] | None = None
         self._estimator = _build_estimator(self._values)
         self._queue_t: list[float] = []
         self._queue_value: list[float] = []
@@ -244,6 +285,8 @@ class VehicleEstimatorNode(Node):
         if changed:
             with self._lock:  # a new nominal part or window: start over
                 self._estimator = _build_estimator(self._values)
+                if self._drive is not None:  # the drive in force is still in force
+                    self._estimator.set_drive(*self._drive)
                 self._record = self._estimator.last_estimate
 
     # -- inputs (queue only) -------------------------------------------------------------------
@@ -317,10 +360,13 @@ class VehicleEstimatorNode(Node):
         amplitude = message.amplitude_n if message.enabled else 0.0
         with self._lock:
             self._drain()  # samples before the command belong to the previous drive
+            drive = (frequency, amplitude, _seconds(message.header.stamp))
             try:
-                self._estimator.set_drive(frequency, amplitude, _seconds(message.header.stamp))
+                self._estimator.set_drive(*drive)
             except ValueError as error:
                 self.get_logger().warn(f"ignoring drive command: {error}")
+            else:
+                self._drive = drive
 
     # -- estimation ----------------------------------------------------------------------------
     def _drain(self) -> None:

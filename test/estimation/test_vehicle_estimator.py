@@ -342,6 +342,42 @@ def test_slip_trigger_grazing_the_stick_limit_gives_low_confidence_not_a_poor_mo
     assert noisy.mean_speed_confidence < 0.4
 
 
+@pytest.mark.parametrize(
+    ("band_hz", "frequency_hz", "order", "advance_cycles"),
+    [
+        # the default band holds the f/3 subharmonic, the strongest line: taken for the drive,
+        # "advance per cycle" then spans 3 drive cycles
+        (EstimatorConfig().frequency_band_hz, 31.0 / 3.0, 1, 3),
+        # a band above f/2 (the drive's range) excludes f/3; of the lines left in it the drive
+        # line is the strongest (2f/3 at 20.7 Hz comes close)
+        ((20.0, 60.0), 31.0, 3, 1),
+    ],
+)
+def test_without_a_command_the_search_band_decides_subharmonic_or_drive(
+    band_hz: tuple[float, float], frequency_hz: float, order: int, advance_cycles: int
+) -> None:
+    """31 Hz / 10 N, c = 50: the carrier answers at f/3, and its f/3 line is stronger than the
+    drive line. From the accelerometer alone that is ambiguous; the search band (the drive's
+    frequency range) is what tells the drive line from a subharmonic."""
+    params = FeederParameters(
+        damping_ns_per_m=50.0, drive_frequency_hz=31.0, drive_amplitude_n=10.0, track_length_m=1e3
+    )
+    sim = simulate(params, 8.0, RATE)
+    est = VehicleEstimator(
+        EstimatorConfig(
+            part=PartModel.from_parameters(params), window_s=WINDOW_S, frequency_band_hz=band_hz
+        )
+    )
+    rec = _feed(est, sim.t_s, _noisy(sim)).records[-1]
+    assert rec.status == Status.OK
+    assert rec.drive_frequency_hz == pytest.approx(frequency_hz, rel=1e-3)
+    assert rec.period_order == order
+    x = sim.part_x_m[:, 0]
+    span = advance_cycles / 31.0
+    true_advance = float(np.interp(rec.t_s, sim.t_s, x) - np.interp(rec.t_s - span, sim.t_s, x))
+    assert rec.advance_per_cycle_m == pytest.approx(true_advance, rel=0.05)
+
+
 def test_cost_allows_a_1khz_stream_with_headroom(steady: SimulationResult) -> None:
     est = _estimator()
     est.set_drive(PARAMS.drive_frequency_hz, PARAMS.drive_amplitude_n, 0.0)
@@ -397,6 +433,8 @@ def test_config_is_validated() -> None:
         EstimatorConfig(window_s=0.0)
     with pytest.raises(ParameterError, match="min_fit_s"):
         EstimatorConfig(min_fit_s=2.0, fit_window_s=1.0)
+    with pytest.raises(ParameterError, match="frequency_band_hz"):
+        EstimatorConfig(frequency_band_hz=(60.0, 20.0))
     with pytest.raises(ParameterError, match="frequency_hz"):
         VehicleEstimator().set_drive(0.0, 1.0, 0.0)
 

@@ -3,25 +3,41 @@
 from __future__ import annotations
 
 import math
+import subprocess
 import sys
 import time
 from contextlib import ExitStack
 from pathlib import Path
+from typing import Any
 
 import numpy as np
 import pytest
 from diagnostic_msgs.msg import DiagnosticArray, DiagnosticStatus
+from rcl_interfaces.msg import Parameter as ParameterMsg
+from rcl_interfaces.msg import ParameterType, ParameterValue
+from rcl_interfaces.srv import (
+    DescribeParameters,
+    GetParameters,
+    SetParameters,
+    SetParametersAtomically,
+)
 from rclpy.qos import QoSProfile, ReliabilityPolicy
 from rclpy.serialization import serialize_message
-from ros_test_tools import probe_node, running, wait_until
+from ros_test_tools import call, probe_node, running, wait_until
 from sensor_msgs.msg import Imu
 
 from feeder_ros.msg import DriveCommand, PartStateArray, VehicleEstimate
-from feeder_ros.nodes.vehicle_estimator import imu_sample
+from feeder_ros.nodes.vehicle_estimator import DEFAULTS, _build_estimator, imu_sample
 
 BIN = Path(sys.executable).parent
 CONFIG = Path(__file__).resolve().parents[2] / "config" / "platform_simulator.yaml"
 RELIABLE = QoSProfile(depth=1000, reliability=ReliabilityPolicy.RELIABLE)
+
+
+def _double(name: str, value: float) -> ParameterMsg:
+    return ParameterMsg(
+        name=name, value=ParameterValue(type=ParameterType.PARAMETER_DOUBLE, double_value=value)
+    )
 
 
 def _seconds(stamp) -> float:  # type: ignore[no-untyped-def]
@@ -176,6 +192,89 @@ def test_bad_samples_are_reported_not_averaged_in() -> None:
         assert wait_until(lambda: reported(VehicleEstimate.STATUS_OUT_OF_ORDER), 10.0)
 
 
+def test_drive_frequency_band_is_declared_and_min_below_max_is_enforced() -> None:
+    ns = "/estimator_band"
+    base = f"{ns}/vehicle_estimator"
+    command = [str(BIN / "vehicle_estimator"), "--ros-args", "-r", f"__ns:={ns}"]
+    names = ["min_drive_frequency_hz", "max_drive_frequency_hz"]
+    with running(command), probe_node() as node:
+        descriptors = call(
+            node, DescribeParameters, f"{base}/describe_parameters",
+            DescribeParameters.Request(names=names),
+        ).descriptors  # fmt: skip
+        assert [d.name for d in descriptors] == names
+        for descriptor in descriptors:
+            assert descriptor.type == ParameterType.PARAMETER_DOUBLE
+            assert not descriptor.read_only  # applied live: the estimator restarts
+            assert "search band when no drive command is received [Hz]" in descriptor.description
+            [bounds] = descriptor.floating_point_range
+            assert (bounds.from_value, bounds.to_value) == (0.1, 10000.0)
+
+        def get() -> list[float]:
+            values = call(
+                node, GetParameters, f"{base}/get_parameters", GetParameters.Request(names=names)
+            ).values
+            return [v.double_value for v in values]
+
+        assert get() == [2.0, 300.0]  # the estimator core's default band
+
+        def set_one(name: str, value: float) -> Any:
+            request = SetParameters.Request(parameters=[_double(name, value)])
+            return call(node, SetParameters, f"{base}/set_parameters", request).results[0]
+
+        # one end changed alone is checked against the other end in force
+        refused = set_one("min_drive_frequency_hz", 400.0)
+        assert not refused.successful
+        assert refused.reason == (
+            "min_drive_frequency_hz=400 Hz must be below max_drive_frequency_hz=300 Hz"
+        )
+        refused = set_one("max_drive_frequency_hz", 2.0)
+        assert not refused.successful
+        assert "min_drive_frequency_hz=2 Hz must be below max_drive_frequency_hz=2 Hz" in (
+            refused.reason
+        )
+        assert not set_one("min_drive_frequency_hz", 0.0).successful  # below the range
+        assert get() == [2.0, 300.0]
+
+        # both ends at once (the drive's range), then one end against the new other end
+        band = SetParametersAtomically.Request(
+            parameters=[_double(names[0], 20.0), _double(names[1], 60.0)]
+        )
+        answer = call(node, SetParametersAtomically, f"{base}/set_parameters_atomically", band)
+        assert answer.result.successful, answer.result.reason
+        assert get() == [20.0, 60.0]
+        refused = set_one("min_drive_frequency_hz", 60.0)
+        assert not refused.successful
+        assert "min_drive_frequency_hz=60 Hz must be below max_drive_frequency_hz=60 Hz" in (
+            refused.reason
+        )
+        accepted = set_one("max_drive_frequency_hz", 45.0)
+        assert accepted.successful, accepted.reason
+        assert get() == [20.0, 45.0]
+
+
+def test_the_band_parameters_become_the_estimators_search_band() -> None:
+    values = {**DEFAULTS, "min_drive_frequency_hz": 20.0, "max_drive_frequency_hz": 60.0}
+    assert _build_estimator(values).config.frequency_band_hz == (20.0, 60.0)
+    assert _build_estimator(dict(DEFAULTS)).config.frequency_band_hz == (2.0, 300.0)
+
+
+def test_node_refuses_to_start_with_min_not_below_max() -> None:
+    result = subprocess.run(
+        [
+            str(BIN / "vehicle_estimator"), "--ros-args", "-r", "__ns:=/estimator_bad_band",
+            "-p", "min_drive_frequency_hz:=60.0", "-p", "max_drive_frequency_hz:=20.0",
+        ],
+        capture_output=True,
+        text=True,
+        timeout=60,
+    )  # fmt: skip
+    assert result.returncode == 2
+    assert "min_drive_frequency_hz=60 Hz must be below max_drive_frequency_hz=20 Hz" in (
+        result.stdout + result.stderr
+    )
+
+
 @pytest.mark.parametrize("frame_id", ["", "a", "carrier_imu", "x" * 13, "ümlaut"])
 def test_imu_fields_are_read_straight_from_the_cdr_bytes(frame_id: str) -> None:
     message = Imu()
@@ -199,3 +298,31 @@ def test_malformed_imu_bytes_are_refused_with_the_reason() -> None:
         imu_sample(data[:240])  # cut inside linear_acceleration
     with pytest.raises(ValueError, match="not a CDR message"):
         imu_sample(b"\x07\x07" + data[2:])
+
+
+def test_a_parameter_change_keeps_the_drive_command_in_force() -> None:
+    """A live parameter change rebuilds the estimator; the drive command received before stays in
+    force (without it the new estimator would search the band and could take a subharmonic)."""
+    import rclpy
+    from rclpy.parameter import Parameter
+
+    from feeder_ros.nodes.vehicle_estimator import VehicleEstimatorNode
+
+    context = rclpy.Context()
+    rclpy.init(context=context)
+    try:
+        node = VehicleEstimatorNode(context=context)
+        try:
+            assert math.isnan(node._estimator.drive_frequency_hz)
+            command = DriveCommand(enabled=True, frequency_hz=31.0, amplitude_n=10.0)
+            command.header.stamp.sec = 5
+            node._on_command(command)
+            assert node._estimator.drive_frequency_hz == 31.0
+            [result] = node.set_parameters([Parameter("window_s", value=3.0)])
+            assert result.successful, result.reason
+            assert node._estimator.config.window_s == 3.0  # a new estimator ...
+            assert node._estimator.drive_frequency_hz == 31.0  # ... with the drive in force
+        finally:
+            node.destroy_node()
+    finally:
+        rclpy.shutdown(context=context)
