@@ -108,7 +108,7 @@ NROWS = 10
 N_ROT = 64  # output samples evaluated from one directly evaluated basis by exact shifts
 
 
-@njit(cache=True, inline="always")
+@njit(cache=True)
 def _fill_rows(rows, sigma, lam, A, w, phi, m, c, k, F0, x0, v0, held):
     """Coefficient rows of x, x', ..., x^(5) (rows 0-5) and F, ..., F''' (rows 6-9); False at
     resonance."""
@@ -353,7 +353,7 @@ P_ROWS = 12
 PIECE_WIDTH = P_ROWS + 30
 
 
-@njit(cache=True, inline="always")
+@njit(cache=True)
 def _record_piece(pieces, k, t0, length, sigma, lam, root, r1, w, phi, mode, rows, xe, ve, ae):
     pieces[k, P_XE] = xe
     pieces[k, P_VE] = ve
@@ -380,6 +380,20 @@ REL_NOW = 3  # at or across its zero, moving out: an event now
 
 
 @njit(cache=True, inline="always")
+def _clearly_free(rows, r, sg, c0, c1, cc, ss, sn, cs, bc, bs):
+    """True when the event function is clearly positive at the start: the common case of
+    :func:`_release`, decided without the square root against an upper bound of the scale (|P| +
+    |Q| for the sinusoid's amplitude). Inlined into the callers, because a call that passes arrays
+    costs two atomic reference-count updates per array."""
+    f = sg * (
+        rows[r, 0] * cc + rows[r, 1] * ss + rows[r, 2] * sn + rows[r, 3] * cs + rows[r, 4]
+    ) + c0
+    upper = abs(rows[r, 0]) * bc + abs(rows[r, 1]) * bs + abs(rows[r, 2]) + abs(rows[r, 3])
+    upper = abs(sg) * (upper + abs(rows[r, 4])) + abs(c0)
+    return f > 64.0 * EPS * upper and not (sg == 0.0 and c1 == 0.0 and c0 > 0.0)
+
+
+@njit(cache=True)
 def _release(rows, r, sg, c0, c1, c2, T, cc, ss, sn, cs, bc, bs, der):
     """Classify the event function ``sg*row_r + c0 + c1*s + c2*s^2`` at the start ``s = 0``.
 
@@ -387,13 +401,9 @@ def _release(rows, r, sg, c0, c1, c2, T, cc, ss, sn, cs, bc, bs, der):
     zero (just after its own event) is released when its first non-vanishing derivative (order 1-3)
     points inward: the Taylor lower bound then proves it positive from the returned offset on.
     """
-    # a clear margin against an upper bound of the scale (|P| + |Q| for the sinusoid's amplitude)
-    # decides the common case without the square root
-    f = sg * _row(rows, r, cc, ss, sn, cs) + c0
-    upper = abs(rows[r, 0]) * bc + abs(rows[r, 1]) * bs + abs(rows[r, 2]) + abs(rows[r, 3])
-    upper = abs(sg) * (upper + abs(rows[r, 4])) + abs(c0)
-    if f > 64.0 * EPS * upper and not (sg == 0.0 and c1 == 0.0 and c0 > 0.0):
+    if _clearly_free(rows, r, sg, c0, c1, cc, ss, sn, cs, bc, bs):
         return REL_FREE, 0.0
+    f = sg * _row(rows, r, cc, ss, sn, cs) + c0
     scale = abs(sg) * _row_bound(rows, r, bc, bs) + abs(c0)
     if scale == 0.0 or (sg == 0.0 and c1 == 0.0 and c0 > 0.0):
         return REL_NEVER, 0.0
@@ -496,7 +506,7 @@ def check_samples(samples):
     return 2 if unsorted else 0
 
 
-@njit(cache=True, inline="always")
+@njit(cache=True)
 def _log(ev_t, ev_kind, ev_part, counters, t, kind, part):
     n = counters[1]
     ev_t[n] = t
@@ -505,7 +515,7 @@ def _log(ev_t, ev_kind, ev_part, counters, t, kind, part):
     counters[1] = n + 1
 
 
-@njit(cache=True, inline="always")
+@njit(cache=True)
 def _log_group(ev_t, ev_kind, ev_part, counters, t, kind, g, g_head, m_next):
     i = g_head[g]
     while i >= 0:
@@ -513,7 +523,7 @@ def _log_group(ev_t, ev_kind, ev_part, counters, t, kind, g, g_head, m_next):
         i = m_next[i]
 
 
-@njit(cache=True, inline="always")
+@njit(cache=True)
 def _group_lead(g, g_head, m_next, m_o):
     lead = -np.inf
     i = g_head[g]
@@ -805,22 +815,27 @@ def advance(
         for i in range(nf):
             f_eval[i] = False
         for i in range(n_cf if cont else 0, nf):
-            code, s_rel = _release(
-                rows,
-                f_row[i],
-                f_sgn[i],
-                f_c0[i],
-                f_c1[i],
-                f_c2[i],
-                T - ts,
-                cc,
-                ss,
-                sn,
-                cs,
-                bc,
-                bs,
-                der,
-            )
+            if _clearly_free(
+                rows, f_row[i], f_sgn[i], f_c0[i], f_c1[i], cc, ss, sn, cs, bc, bs
+            ):
+                code, s_rel = REL_FREE, 0.0
+            else:
+                code, s_rel = _release(
+                    rows,
+                    f_row[i],
+                    f_sgn[i],
+                    f_c0[i],
+                    f_c1[i],
+                    f_c2[i],
+                    T - ts,
+                    cc,
+                    ss,
+                    sn,
+                    cs,
+                    bc,
+                    bs,
+                    der,
+                )
             f_skip[i] = ts + s_rel
             f_zero[i] = code == REL_NEVER
             if code == REL_NOW:
@@ -1411,22 +1426,27 @@ def _march_group(
             if ph == STICK and nf == 2 and _row_bound(rows, 2, bc, bs) < L:
                 nf = 0  # |a| stays below the stick limit for the rest of the piece
             for i in range(nf):
-                code, f_skip[i] = _release(
-                    rows,
-                    f_row[i],
-                    f_sgn[i],
-                    f_c0[i],
-                    f_c1[i],
-                    f_c2[i],
-                    rem,
-                    cc,
-                    ss,
-                    sn,
-                    cs,
-                    bc,
-                    bs,
-                    der,
-                )
+                if _clearly_free(
+                    rows, f_row[i], f_sgn[i], f_c0[i], f_c1[i], cc, ss, sn, cs, bc, bs
+                ):
+                    code, f_skip[i] = REL_FREE, 0.0
+                else:
+                    code, f_skip[i] = _release(
+                        rows,
+                        f_row[i],
+                        f_sgn[i],
+                        f_c0[i],
+                        f_c1[i],
+                        f_c2[i],
+                        rem,
+                        cc,
+                        ss,
+                        sn,
+                        cs,
+                        bc,
+                        bs,
+                        der,
+                    )
                 f_zero[i] = code == REL_NEVER
                 if code == REL_NOW:
                     hit = i
