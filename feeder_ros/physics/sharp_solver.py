@@ -1204,14 +1204,17 @@ def advance_many(
     g_L,
     g_D,
     g_mass,
+    t_mid,
     t_end,
+    results_mid,
     results,
 ):
     """Many independent runs (one part each, no samples, no event log) in parallel.
 
     ``models[p]``/``states[p]`` per point, the drive of point ``p`` is
     ``d_*[d_offset[p]:d_offset[p+1]]``. ``results[p]`` = [status, part displacement, slip time,
-    exit time (nan), time reached].
+    exit time (nan), time reached] at ``t_end[p]``; with ``0 < t_mid[p] < t_end[p]`` the run also
+    stops at ``t_mid[p]`` on the way, and ``results_mid[p]`` holds the same values there.
     """
     n = models.shape[0]
     for p in prange(n):
@@ -1239,53 +1242,65 @@ def advance_many(
         e2 = np.zeros((0, 1))
         e28 = np.zeros((0, 1), np.int8)
         ei = np.zeros(0, np.int64)
-        status = advance(
-            models[p],
-            d_start[a:b],
-            d_omega[a:b],
-            d_amp[a:b],
-            d_phase[a:b],
-            d_logged[a:b],
-            st,
-            gl,
-            gd,
-            gm,
-            gu,
-            gy,
-            gs,
-            glead,
-            gph,
-            gh,
-            mg,
-            mn,
-            mo,
-            mm,
-            ms,
-            me,
-            t_end[p],
-            empty,
-            empty,
-            empty,
-            empty,
-            e8,
-            e2,
-            e2,
-            e28,
-            empty,
-            e8,
-            ei,
-            cnt,
-            np.zeros((0, PIECE_WIDTH)),
-        )
-        results[p, 0] = status
-        if mg[0] >= 0:
-            results[p, 1] = gy[0] + st[S_X]
-            results[p, 2] = gs[0] - ms[0]
-        else:
-            results[p, 1] = mo[0]
-            results[p, 2] = ms[0]
-        results[p, 3] = me[0]
-        results[p, 4] = st[S_T]
+        status = STATUS_DONE
+        split = 0.0 < t_mid[p] < t_end[p]
+        for leg in range(2 if split else 1):
+            t_stop = t_mid[p] if split and leg == 0 else t_end[p]
+            status = advance(
+                models[p],
+                d_start[a:b],
+                d_omega[a:b],
+                d_amp[a:b],
+                d_phase[a:b],
+                d_logged[a:b],
+                st,
+                gl,
+                gd,
+                gm,
+                gu,
+                gy,
+                gs,
+                glead,
+                gph,
+                gh,
+                mg,
+                mn,
+                mo,
+                mm,
+                ms,
+                me,
+                t_stop,
+                empty,
+                empty,
+                empty,
+                empty,
+                e8,
+                e2,
+                e2,
+                e28,
+                empty,
+                e8,
+                ei,
+                cnt,
+                np.zeros((0, PIECE_WIDTH)),
+            )
+            out = results_mid if split and leg == 0 else results
+            out[p, 0] = status
+            if mg[0] >= 0:
+                out[p, 1] = gy[0] + st[S_X]
+                out[p, 2] = gs[0] - ms[0]
+            else:
+                out[p, 1] = mo[0]
+                out[p, 2] = ms[0]
+            out[p, 3] = me[0]
+            out[p, 4] = st[S_T]
+            if status != STATUS_DONE:
+                break
+            if split and leg == 0 and mg[0] < 0:
+                # the part left before t_mid: nothing changes after
+                for q in range(5):
+                    results[p, q] = results_mid[p, q]
+                break
 
 
 @njit(cache=True)

@@ -1032,16 +1032,17 @@ def simulate_many(
     Returns the part's exact mean speed and slip fraction over ``duration_s`` (up to its exit if
     it leaves the track). With ``settle_s > 0`` they are measured over the window
     ``[settle_s, settle_s + duration_s]`` instead (the start-up transient left out, as a
-    measurement on a running feeder would): every point is then also solved up to ``settle_s``,
-    and, the solver being deterministic, the window's values are the differences of the two
-    runs. A part that leaves the track before ``settle_s`` has a nan speed.
+    measurement on a running feeder would): each point's run stops at ``settle_s`` on the way
+    to record its totals there, and the window's values are the differences of the totals at the
+    two instants. A part that leaves the track before ``settle_s`` has a nan speed.
     """
     settle = _finite("settle_s", settle_s, nonnegative=True)
-    if settle == 0.0:
-        return _simulate_many_from_rest(points, duration_s, part)
     duration = _finite("duration_s", duration_s, positive=True)
-    head = _simulate_many_from_rest(points, settle, part)
-    whole = _simulate_many_from_rest(points, settle + duration, part)
+    if settle == 0.0:
+        return _simulate_many_from_rest(points, duration, part)[1]
+    # one run per point, stopping at settle_s on the way
+    head, whole = _simulate_many_from_rest(points, settle + duration, part, settle)
+    assert head is not None
     # distances and slip times from rest: speed * span (span ends at the exit for an exited part)
     head_span = np.where(np.isfinite(head.exit_t_s), head.exit_t_s, settle)
     whole_span = np.where(np.isfinite(whole.exit_t_s), whole.exit_t_s, settle + duration)
@@ -1064,7 +1065,9 @@ def _simulate_many_from_rest(
     points: Sequence[FeederParameters | tuple[FeederParameters, DriveSchedule | None]],
     duration_s: float,
     part: PartSpec,
-) -> ManySummary:
+    mid_s: float = 0.0,
+) -> tuple[ManySummary | None, ManySummary]:
+    """Totals from rest at ``duration_s``, and at ``mid_s`` on the way if ``0 < mid_s``."""
     duration = _finite("duration_s", duration_s, positive=True)
     P = len(points)
     models = np.zeros((P, _k.MODEL_SIZE))
@@ -1094,6 +1097,7 @@ def _simulate_many_from_rest(
         logged.append(seg.logged)
         offsets[p + 1] = offsets[p] + seg.start_s.size
     results = np.zeros((P, 5))
+    results_mid = np.zeros((P, 5))
     _k.advance_many(
         models,
         np.concatenate(starts) if P else np.zeros(0),
@@ -1106,18 +1110,24 @@ def _simulate_many_from_rest(
         g_L,
         g_D,
         g_mass,
+        np.full(P, mid_s),
         np.full(P, duration),
+        results_mid,
         results,
     )
     bad = np.flatnonzero(results[:, 0] != _k.STATUS_DONE)
     if bad.size:
         raise SimulationError(f"sharp solver failed at points {bad.tolist()} (status codes)")
-    exit_t = results[:, 3]
-    span = np.where(np.isfinite(exit_t), exit_t, duration)
-    # displacement of an exited part: track end reached at exit (lab position stored by the kernel)
-    disp = results[:, 1]
-    return ManySummary(
-        mean_part_speed_mps=disp / span,
-        slip_fraction=results[:, 2] / span,
-        exit_t_s=exit_t,
-    )
+
+    def summary(values: F64, span_s: float) -> ManySummary:
+        exit_t = values[:, 3]
+        span = np.where(np.isfinite(exit_t), exit_t, span_s)
+        # displacement of an exited part: track end reached at exit (lab position from the kernel)
+        return ManySummary(
+            mean_part_speed_mps=values[:, 1] / span,
+            slip_fraction=values[:, 2] / span,
+            exit_t_s=exit_t,
+        )
+
+    mid = summary(results_mid, mid_s) if 0.0 < mid_s < duration else None
+    return mid, summary(results, duration)

@@ -155,6 +155,30 @@ def test_simulate_many_measures_a_window_after_settling() -> None:
         simulate_many([point], 1.0, settle_s=-1.0)
 
 
+def test_simulate_many_window_ends_at_an_exit_inside_it() -> None:
+    """One run per point stops at settle_s on the way: a part leaving during the window is
+    measured from settle_s to its exit, as a sampled run of the same point shows."""
+    point = FeederParameters(
+        drive_amplitude_n=20.0, drive_frequency_hz=10.0, damping_ns_per_m=10.0, track_length_m=4e-3
+    )
+    summary = simulate_many([point], 1.0, settle_s=0.25)
+    exit_t = summary.exit_t_s[0]
+    assert 0.25 < exit_t < 1.25
+    run = simulate(point, 1.25, 4.0)  # t = 0.25 is row 1
+    assert run.t_s[1] == 0.25
+    assert run.part_exit_t_s[0] == pytest.approx(exit_t, abs=1e-12)
+    # lab position at the exit: the track end plus the carrier's displacement then
+    carrier = simulate_carrier(point, exit_t, 1.0 / exit_t)
+    assert carrier.t_s[1] == pytest.approx(exit_t, abs=1e-15)
+    at_exit = point.track_length_m + carrier.carrier_x_m[1]
+    window_speed = (at_exit - run.part_x_m[1, 0]) / (exit_t - 0.25)
+    assert summary.mean_part_speed_mps[0] == pytest.approx(window_speed, rel=1e-9)
+    # a window that starts after the exit: no speed, the exit time kept
+    late = simulate_many([point], 1.0, settle_s=exit_t + 0.01)
+    assert np.isnan(late.mean_part_speed_mps[0])
+    assert late.exit_t_s[0] == pytest.approx(exit_t, abs=1e-12)
+
+
 def test_carrier_only_and_parts_helpers(case_study: FeederParameters) -> None:
     heavy = case_study.with_changes(part_mass_kg=2.0)
     carrier = simulate_carrier(heavy, 0.2, 1000.0)
