@@ -385,9 +385,10 @@ def _clearly_free(rows, r, sg, c0, c1, cc, ss, sn, cs, bc, bs):
     :func:`_release`, decided without the square root against an upper bound of the scale (|P| +
     |Q| for the sinusoid's amplitude). Inlined into the callers, because a call that passes arrays
     costs two atomic reference-count updates per array."""
-    f = sg * (
-        rows[r, 0] * cc + rows[r, 1] * ss + rows[r, 2] * sn + rows[r, 3] * cs + rows[r, 4]
-    ) + c0
+    f = (
+        sg * (rows[r, 0] * cc + rows[r, 1] * ss + rows[r, 2] * sn + rows[r, 3] * cs + rows[r, 4])
+        + c0
+    )
     upper = abs(rows[r, 0]) * bc + abs(rows[r, 1]) * bs + abs(rows[r, 2]) + abs(rows[r, 3])
     upper = abs(sg) * (upper + abs(rows[r, 4])) + abs(c0)
     return f > 64.0 * EPS * upper and not (sg == 0.0 and c1 == 0.0 and c0 > 0.0)
@@ -815,9 +816,7 @@ def advance(
         for i in range(nf):
             f_eval[i] = False
         for i in range(n_cf if cont else 0, nf):
-            if _clearly_free(
-                rows, f_row[i], f_sgn[i], f_c0[i], f_c1[i], cc, ss, sn, cs, bc, bs
-            ):
+            if _clearly_free(rows, f_row[i], f_sgn[i], f_c0[i], f_c1[i], cc, ss, sn, cs, bc, bs):
                 code, s_rel = REL_FREE, 0.0
             else:
                 code, s_rel = _release(
@@ -1295,6 +1294,7 @@ def advance_many(
             out[p, 3] = me[0]
             out[p, 4] = st[S_T]
             if status != STATUS_DONE:
+                results[p, 0] = status  # the caller checks the final results
                 break
             if split and leg == 0 and mg[0] < 0:
                 # the part left before t_mid: nothing changes after
