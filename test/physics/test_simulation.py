@@ -14,6 +14,7 @@ from feeder_ros.physics.simulation import (
     FeederSimulator,
     PartSpec,
     Phase,
+    SimulationError,
     simulate,
     simulate_carrier,
     simulate_many,
@@ -153,6 +154,19 @@ def test_simulate_many_measures_a_window_after_settling() -> None:
     assert np.isfinite(gone.exit_t_s[0])
     with pytest.raises(ParameterError, match=r"settle_s=-1\.0"):
         simulate_many([point], 1.0, settle_s=-1.0)
+
+
+@pytest.mark.parametrize("settle_s", [0.0, 0.5])
+def test_simulate_many_reports_a_point_the_solver_cannot_run(settle_s: float) -> None:
+    """An undamped point driven exactly at its forward branch's natural frequency has no bounded
+    closed form: the solver stops at once, and simulate_many names that point (with a settle
+    window too, where the run stops in its first leg)."""
+    good = FeederParameters(drive_amplitude_n=10.0)
+    k = good.forward_stiffness_n_per_m * good.cos_theta
+    f_n = math.sqrt(k / good.equivalent_mass_kg) / (2.0 * math.pi)
+    resonant = good.with_changes(drive_frequency_hz=f_n)
+    with pytest.raises(SimulationError, match=r"points \[1\]"):
+        simulate_many([good, resonant], 1.0, settle_s=settle_s)
 
 
 def test_simulate_many_window_ends_at_an_exit_inside_it() -> None:
