@@ -26,6 +26,7 @@ import numpy as np
 import yaml
 
 from feeder_ros.atomic_files import atomic_text
+from feeder_ros.csv_cells import csv_cell
 from feeder_ros.design.optimizer import DesignEvaluation, DesignProblem, DesignResult
 from feeder_ros.design.sensitivity import (
     SENSITIVITY_COLUMNS,
@@ -232,7 +233,7 @@ def write_report(
         writer = csv.writer(stream, lineterminator="\n")
         writer.writerow(SENSITIVITY_COLUMNS)
         for r in rows:
-            writer.writerow([_csv(r.as_dict()[name]) for name in SENSITIVITY_COLUMNS])
+            writer.writerow([csv_cell(r.as_dict()[name]) for name in SENSITIVITY_COLUMNS])
     paths.append(path)
 
     path = out_dir / "optimum_params.yaml"
@@ -261,14 +262,6 @@ def write_report(
 
 def _finite(row: SensitivityRow) -> bool:
     return math.isfinite(row.speed_elasticity)
-
-
-def _csv(value: object) -> str:
-    if isinstance(value, bool):
-        return "1" if value else "0"
-    if isinstance(value, float):
-        return repr(value)
-    return str(value)
 
 
 def plot_convergence(path: Path, result: DesignResult, reference: DesignEvaluation) -> Path:

@@ -29,6 +29,8 @@ from typing import Any, TextIO
 import numpy as np
 import numpy.typing as npt
 
+from feeder_ros.csv_cells import csv_cell
+
 __all__ = [
     "CSV_COLUMNS",
     "SweepDataError",
@@ -377,14 +379,6 @@ class SweepPoint:
 CSV_COLUMNS: tuple[str, ...] = tuple(f.name for f in fields(SweepPoint))
 
 
-def _format(value: object) -> str:
-    if isinstance(value, bool):
-        return "1" if value else "0"
-    if isinstance(value, float):
-        return repr(value)
-    return str(value)
-
-
 @dataclass(frozen=True)
 class SweepGroup:
     """The usable points of one (amplitude, part mass) curve, sorted by frequency; ``excluded``
@@ -422,7 +416,7 @@ class SweepResult:
         writer = csv.writer(stream, lineterminator="\n")
         writer.writerow(CSV_COLUMNS)
         for point in self.points:
-            writer.writerow([_format(getattr(point, name)) for name in CSV_COLUMNS])
+            writer.writerow([csv_cell(getattr(point, name)) for name in CSV_COLUMNS])
 
     @classmethod
     def read_csv(cls, path: str | Path, source: str | None = None) -> SweepResult:
