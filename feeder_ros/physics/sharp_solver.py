@@ -372,6 +372,68 @@ def _record_piece(pieces, k, t0, length, sigma, lam, root, r1, w, phi, mode, row
             pieces[k, P_ROWS + 5 * r + j] = rows[r, j]
 
 
+# node tables of recorded pieces, shared by every group of a pass (see :func:`piece_tables`)
+NODE_RAD = 0.25  # node spacing in radians of the piece's fastest rate
+NODE_MAX = 4096  # nodes per piece at most
+TAB_WIDTH = 5  # x, x', x'', x''', x'''' at a node
+
+
+@njit(cache=True)
+def _node_count_and_step(pieces, k):
+    """(node count, node spacing) of piece ``k``: nodes at ``i*h`` and the last at its end;
+    held pieces (Filippov sliding) get none (their groups are searched without a table)."""
+    T = pieces[k, P_LEN]
+    if pieces[k, P_MODE] == 0.0 or not T > 0.0:
+        return 0, 0.0
+    sigma = pieces[k, P_SIGMA]
+    lam = pieces[k, P_LAM]
+    root = pieces[k, P_ROOT]
+    rate = max(pieces[k, P_W], abs(sigma) + (root if lam >= 0.0 else 0.0))
+    if lam < 0.0:
+        rate = max(rate, math.sqrt(sigma * sigma + root * root))
+    cells = 1 if rate == 0.0 else math.ceil(T * rate / NODE_RAD)
+    cells = min(max(cells, 1), NODE_MAX - 1)
+    return cells + 1, T / cells
+
+
+@njit(cache=True, parallel=True)
+def piece_tables(pieces, n_pieces):
+    """Node tables of the recorded pieces, shared by all groups: ``(node_start, node_h, tab,
+    bnd)``. Piece ``k`` has nodes ``node_start[k] .. node_start[k + 1] - 1`` at local times
+    ``i*node_h[k]`` (the last at the piece's end), ``tab[node] = x .. x''''`` there (exact closed
+    form), and ``bnd[k, r]`` bounds ``|x^(r)|`` over the whole piece (r = 0 .. 5)."""
+    node_start = np.zeros(n_pieces + 1, np.int64)
+    node_h = np.zeros(n_pieces)
+    for k in range(n_pieces):
+        n, h = _node_count_and_step(pieces, k)
+        node_start[k + 1] = node_start[k] + n
+        node_h[k] = h
+    tab = np.empty((node_start[n_pieces], TAB_WIDTH))
+    bnd = np.zeros((n_pieces, 6))
+    for k in prange(n_pieces):
+        rows = np.zeros((6, 5))
+        for r in range(6):
+            for j in range(5):
+                rows[r, j] = pieces[k, P_ROWS + 5 * r + j]
+        sigma = pieces[k, P_SIGMA]
+        lam = pieces[k, P_LAM]
+        root = pieces[k, P_ROOT]
+        r1 = pieces[k, P_R1]
+        w = pieces[k, P_W]
+        phi = pieces[k, P_PHI]
+        bc, bs = _basis_bounds(0.0, sigma, lam, root, r1)
+        for r in range(6):
+            bnd[k, r] = _row_bound(rows, r, bc, bs)
+        a = node_start[k]
+        n = node_start[k + 1] - a
+        for i in range(n):
+            tau = pieces[k, P_LEN] if i == n - 1 else i * node_h[k]
+            cc, ss, sn, cs = _basis(tau, sigma, lam, root, r1, w, phi)
+            for r in range(TAB_WIDTH):
+                tab[a + i, r] = _row(rows, r, cc, ss, sn, cs)
+    return node_start, node_h, tab, bnd
+
+
 DERIVATIVE_ZERO = 1e-10  # relative size below which a derivative counts as zero on release
 REL_FREE = 0  # positive: search from the start
 REL_SKIP = 1  # starts on its zero, provably positive from the returned offset on
@@ -461,6 +523,43 @@ def _step(f, d, B, f2, B3, h_cap):
         if h2 > h1:
             h1 = h2
     return h1
+
+
+CELL_NONE = 0  # no root in the cell
+CELL_ROOT = 1  # exactly one root inside the cell, the function changes sign across it
+CELL_UNSURE = 2  # undecided from the end values: halved, at last searched with certified steps
+SPLIT_DEPTH = 6  # halvings of an undecided cell before the certified search takes over
+
+
+@njit(cache=True, inline="always")
+def _cell(fa, fb, da, db, ca, cb, B, B3, h, tol, dtol):
+    """Roots in the cell ``(a, a + h]`` of a function with values ``fa, fb``, slopes ``da, db``
+    and curvatures ``ca, cb`` at its ends, ``|f''| <= B`` and ``|f'''| <= B3`` on it.
+
+    ``fa <= tol`` means the function was released at ``a`` (just after its own event): it must
+    leave its zero with ``da > dtol``. The curvature keeps its sign on the cell when ``|ca + cb| >
+    B3*h``; the slope keeps its sign when ``|da + db| > B*h`` (and both have that sign)."""
+    if fa > tol and fb > tol and min(fa, fb) - 0.125 * B * h * h > tol:
+        return CELL_NONE  # above the chord's lower envelope
+    convex = ca + cb > B3 * h
+    concave = ca + cb < -B3 * h
+    if fa <= tol:  # released at a
+        if not da > dtol:
+            return CELL_UNSURE
+        if fb > tol and (convex or concave):
+            return CELL_NONE  # rising from a: convex keeps rising, concave stays above the chord
+        if fb < 0.0 and concave:
+            return CELL_ROOT  # up from a, down through the one root of a concave function
+        return CELL_UNSURE
+    falling = da < 0.0 and db < 0.0 and da + db < -B * h
+    rising = da > 0.0 and db > 0.0 and da + db > B * h
+    if fb < 0.0:
+        return CELL_ROOT if (falling or convex or concave) else CELL_UNSURE
+    if fb <= tol:
+        return CELL_UNSURE  # at the tolerance on the node: the certified search decides
+    if concave or falling or rising or (convex and (da >= 0.0 or db <= 0.0)):
+        return CELL_NONE
+    return CELL_UNSURE
 
 
 @njit(cache=True)
@@ -1308,6 +1407,10 @@ def _march_group(
     g,
     pieces,
     n_pieces,
+    node_start,
+    node_h,
+    tab,
+    bnd,
     track,
     t_end,
     samples,
@@ -1364,6 +1467,8 @@ def _march_group(
     r_R = np.zeros(6)
     vals = np.zeros(6)
     bnds = np.zeros(6)
+    sp_s = np.zeros(SPLIT_DEPTH)
+    sp_v = np.zeros((SPLIT_DEPTH, 3))
     for k in range(n_pieces):
         t0 = pieces[k, P_T0]
         T = pieces[k, P_LEN]
@@ -1377,15 +1482,14 @@ def _march_group(
         for r in range(6):
             for j in range(5):
                 rows[r, j] = pieces[k, P_ROWS + 5 * r + j]
-            r_abs_a[r] = abs(rows[r, 0])
-            r_abs_b[r] = abs(rows[r, 1])
-            r_amp[r] = math.sqrt(rows[r, 2] * rows[r, 2] + rows[r, 3] * rows[r, 3])
-            r_R[r] = np.inf
-            if lam < 0.0:
-                r_R[r] = math.sqrt(rows[r, 0] ** 2 + (rows[r, 1] / root) ** 2)
+        bounds_ready = False  # the certified search's per-row bound data (set up when needed)
         sphi, cphi = _sincos(phi)
         last = k == n_pieces - 1
+        base = node_start[k]
+        nk = node_start[k + 1] - base
+        hk = node_h[k]
         ts = 0.0  # start of the current sub-piece (local time)
+        at_ts = False  # the basis values are those at ts already (the last event's)
         while True:
             if g_head[g] < 0:
                 # the group is empty: nothing more to do
@@ -1395,8 +1499,9 @@ def _march_group(
             if ts == 0.0:
                 cc, ss, sn, cs = 1.0, 0.0, sphi, cphi
                 bc, bs = _basis_bounds(0.0, sigma, lam, root, r1)
-            else:
+            elif not at_ts:
                 cc, ss, sn, cs, bc, bs = _basis_all(ts, sigma, lam, root, r1, w, phi)
+            at_ts = False
             xs = _row(rows, 0, cc, ss, sn, cs)
             vs = 0.0 if held else _row(rows, 1, cc, ss, sn, cs)
             ph = g_phase[g]
@@ -1445,6 +1550,19 @@ def _march_group(
                     rows, f_row[i], f_sgn[i], f_c0[i], f_c1[i], cc, ss, sn, cs, bc, bs
                 ):
                     code, f_skip[i] = REL_FREE, 0.0
+                elif (
+                    i == 0
+                    and ph != STICK
+                    and nk > 1
+                    and abs(f_sgn[0] * _row(rows, 1, cc, ss, sn, cs) + f_c0[0])
+                    <= 64.0 * EPS * (bnd[k, 1] + abs(f_c0[0]))
+                    and f_sgn[0] * _row(rows, 2, cc, ss, sn, cs) + f_c1[0]
+                    > DERIVATIVE_ZERO * (bnd[k, 2] + abs(f_c1[0]))
+                ):
+                    # a slip just started: the relative velocity leaves its zero with a clear
+                    # slope, which the node table handles; the certified offset is worked out
+                    # only if the certified search has to start here (f_skip < 0)
+                    code, f_skip[i] = REL_SKIP, -1.0
                 else:
                     code, f_skip[i] = _release(
                         rows,
@@ -1467,12 +1585,203 @@ def _march_group(
                     hit = i
                     break
             s = 0.0
-            if hit < 0 and nf > 0:
+            certify = hit < 0 and nf > 0  # search with certified steps from s
+            fresh = False  # the certified search starts with fresh basis values
+            if certify and nk > 1 and rem > 0.0 and (ph != STICK or nf == 2):
+                # the node table first: cells without a root are passed on their end values, a
+                # cell with one is solved by a bracketed Halley iteration; undecided cells (and
+                # a part that may reach the track end) go to the certified search
+                fr = f_row[0]
+                nfast = 2 if ph == STICK else 1
+                sgn0 = f_sgn[0]
+                Bf = abs(sgn0) * bnd[k, fr + 2]
+                B3f = abs(sgn0) * bnd[k, fr + 3]
+                tol = 64.0 * EPS * (abs(sgn0) * bnd[k, fr] + abs(f_c0[0]) + rem * abs(f_c1[0]))
+                dtol = DERIVATIVE_ZERO * (abs(sgn0) * bnd[k, fr + 1] + abs(f_c1[0]))
+                u0 = _row(rows, fr, cc, ss, sn, cs)
+                u1 = _row(rows, fr + 1, cc, ss, sn, cs)
+                u2 = _row(rows, fr + 2, cc, ss, sn, cs)
+                i = min(int(ts / hk) + 1, nk - 1)
+                while i < nk - 1 and i * hk <= ts:
+                    i += 1
+                sa = 0.0
+                found = -1
+                unsure = False
+                for j in range(nf):
+                    unsure = unsure or f_zero[j]
+                sp = 0  # pending right ends from splitting undecided cells (exact values)
+                while not unsure:
+                    if sp > 0:
+                        sb = sp_s[sp - 1]
+                        w0 = sp_v[sp - 1, 0]
+                        w1 = sp_v[sp - 1, 1]
+                        w2 = sp_v[sp - 1, 2]
+                    else:
+                        sb = (T if i == nk - 1 else i * hk) - ts
+                        w0 = tab[base + i, fr]
+                        w1 = tab[base + i, fr + 1]
+                        w2 = tab[base + i, fr + 2]
+                    split = False
+                    for j in range(nfast):
+                        sg = f_sgn[j]
+                        c0 = f_c0[j]
+                        c1 = f_c1[j]
+                        code = _cell(
+                            sg * u0 + c0 + c1 * sa,
+                            sg * w0 + c0 + c1 * sb,
+                            sg * u1 + c1,
+                            sg * w1 + c1,
+                            sg * u2,
+                            sg * w2,
+                            Bf,
+                            B3f,
+                            sb - sa,
+                            tol,
+                            dtol,
+                        )
+                        if code == CELL_UNSURE or (code == CELL_ROOT and found >= 0):
+                            split = True
+                        elif code == CELL_ROOT:
+                            found = j
+                    if split:
+                        # halve the cell with an exact evaluation at its middle
+                        found = -1
+                        if sp == SPLIT_DEPTH:
+                            unsure = True
+                            break
+                        sm = 0.5 * (sa + sb)
+                        cc, ss, sn, cs, bc, bs = _basis_all(ts + sm, sigma, lam, root, r1, w, phi)
+                        sp_s[sp] = sm
+                        sp_v[sp, 0] = _row(rows, fr, cc, ss, sn, cs)
+                        sp_v[sp, 1] = _row(rows, fr + 1, cc, ss, sn, cs)
+                        sp_v[sp, 2] = _row(rows, fr + 2, cc, ss, sn, cs)
+                        sp += 1
+                        continue
+                    if found >= 0 or (sp == 0 and i == nk - 1):
+                        break
+                    u0, u1, u2 = w0, w1, w2
+                    sa = sb
+                    if sp > 0:
+                        sp -= 1
+                    else:
+                        i += 1
+                if unsure:
+                    s = sa
+                    fresh = True
+                else:
+                    certify = False
+                    if found >= 0:
+                        sg = f_sgn[found]
+                        c0 = f_c0[found]
+                        c1 = f_c1[found]
+                        fa = sg * u0 + c0 + c1 * sa
+                        fb = sg * w0 + c0 + c1 * sb
+                        da = sg * u1 + c1
+                        db = sg * w1 + c1
+                        hc = sb - sa
+                        # start: the root of the cubic Hermite interpolant (a few Newton steps
+                        # from the secant's root; from the far end for a function released at a)
+                        x = 1.0 if fa <= tol else fa / (fa - fb)
+                        for _ in range(3):
+                            x2 = x * x
+                            p = fa * (2.0 * x2 * x - 3.0 * x2 + 1.0) + fb * (
+                                3.0 * x2 - 2.0 * x2 * x
+                            )
+                            p += hc * (da * (x2 * x - 2.0 * x2 + x) + db * (x2 * x - x2))
+                            dp = (fa - fb) * (6.0 * x2 - 6.0 * x)
+                            dp += hc * (da * (3.0 * x2 - 4.0 * x + 1.0) + db * (3.0 * x2 - 2.0 * x))
+                            if dp == 0.0:
+                                break
+                            x = min(max(x - p / dp, 0.0), 1.0)
+                        lo = sa
+                        hi = sb
+                        x = sa + x * hc
+                        if not lo < x < hi:
+                            x = 0.5 * (lo + hi)
+                        solved = False
+                        for _it in range(100):
+                            tau = ts + x
+                            cc, ss, sn, cs, bc, bs = _basis_all(tau, sigma, lam, root, r1, w, phi)
+                            f = sg * _row(rows, fr, cc, ss, sn, cs) + c0 + c1 * x
+                            d = sg * _row(rows, fr + 1, cc, ss, sn, cs) + c1
+                            f2 = sg * _row(rows, fr + 2, cc, ss, sn, cs)
+                            if f > 0.0:
+                                lo = x
+                            elif f < 0.0:
+                                hi = x
+                            else:
+                                solved = True
+                                break
+                            xn = np.nan
+                            if d != 0.0:
+                                dn = f / d
+                                den = 1.0 - 0.5 * dn * f2 / d  # Halley's correction
+                                xn = x - (dn / den if den > 0.5 else dn)
+                            t_res = 8.0 * EPS * (abs(t0) + tau + 1e-3)
+                            if abs(xn - x) <= t_res:
+                                solved = True  # converged (its step may leave the bracket)
+                                break
+                            if not lo < xn < hi:
+                                xn = 0.5 * (lo + hi)
+                            if hi - lo <= t_res:
+                                solved = True
+                                break
+                            x = xn
+                        if not solved:
+                            return STATUS_STUCK
+                        s = x
+                        hit = found
+                    if ph == SLIP_FORWARD:
+                        # the track-end function falls while the part slips forward: positive
+                        # at the end of the sub-piece means positive all along
+                        s_end = s if hit >= 0 else rem
+                        x_end = _row(rows, 0, cc, ss, sn, cs) if hit >= 0 else pieces[k, P_XE]
+                        fe = f_c0[1] + x_end + s_end * (f_c1[1] + s_end * f_c2[1])
+                        scale = bnd[k, 0] + abs(f_c0[1]) + rem * (abs(f_c1[1]) + rem * abs(f_c2[1]))
+                        if fe <= 64.0 * EPS * scale:
+                            certify = True
+                            fresh = True
+                            s = 0.0
+                            hit = -1
+            if certify and s == 0.0 and f_skip[0] < 0.0:
+                if fresh:
+                    cc, ss, sn, cs, bc, bs = _basis_all(ts, sigma, lam, root, r1, w, phi)
+                    fresh = False
+                code, f_skip[0] = _release(
+                    rows,
+                    f_row[0],
+                    f_sgn[0],
+                    f_c0[0],
+                    f_c1[0],
+                    f_c2[0],
+                    rem,
+                    cc,
+                    ss,
+                    sn,
+                    cs,
+                    bc,
+                    bs,
+                    der,
+                )
+                if code == REL_NOW:
+                    hit = 0
+                    certify = False
+            if certify and not bounds_ready:
+                for r in range(6):
+                    r_abs_a[r] = abs(rows[r, 0])
+                    r_abs_b[r] = abs(rows[r, 1])
+                    r_amp[r] = math.sqrt(rows[r, 2] * rows[r, 2] + rows[r, 3] * rows[r, 3])
+                    r_R[r] = np.inf
+                    if lam < 0.0:
+                        r_R[r] = math.sqrt(rows[r, 0] ** 2 + (rows[r, 1] / root) ** 2)
+                bounds_ready = True
+            if certify:
                 top = 4 if ph == STICK else 3  # highest row whose value/bound is needed, +1
                 while True:
                     tau = ts + s
-                    if s > 0.0:
+                    if s > 0.0 or fresh:
                         cc, ss, sn, cs, bc, bs = _basis_all(tau, sigma, lam, root, r1, w, phi)
+                        fresh = False
                     if held:
                         for r in range(6):
                             vals[r] = 0.0
@@ -1559,6 +1868,7 @@ def _march_group(
                 g_slip[g] += se
             if hit < 0:
                 break
+            at_ts = True
             if se == 0.0 and f_kind[hit] != F_EXIT:
                 zero_count += 1
                 if zero_count > 1000:
@@ -1624,6 +1934,10 @@ def _march_group(
 def advance_groups(
     pieces,
     n_pieces,
+    node_start,
+    node_h,
+    tab,
+    bnd,
     track,
     t_end,
     samples,
@@ -1666,6 +1980,10 @@ def advance_groups(
             g,
             pieces,
             n_pieces,
+            node_start,
+            node_h,
+            tab,
+            bnd,
             track,
             t_end,
             samples,
@@ -1695,3 +2013,115 @@ def advance_groups(
             ev_part,
             ev_n,
         )
+
+
+@njit(cache=True)
+def expand_group_events(ev_t, ev_kind, ev_part, ev_n, members_before, exit_t):
+    """Per-group event rows of :func:`advance_groups` -> one event per member.
+
+    A group event (``ev_part = -1``) goes to every member the group had at the start of the pass
+    (``members_before[i]`` is part ``i``'s group then, -1 for none), in increasing part order,
+    except members that had left by then (``exit_t <= t``); an exit names its part. Group events
+    come first (by group, then time), exits after them.
+    """
+    G = ev_t.shape[0]
+    N = members_before.shape[0]
+    start = np.zeros(G + 1, np.int64)
+    for i in range(N):
+        if members_before[i] >= 0:
+            start[members_before[i] + 1] += 1
+    for g in range(G):
+        start[g + 1] += start[g]
+    member = np.empty(start[G], np.int64)
+    fill = start[:G].copy()
+    for i in range(N):
+        g = members_before[i]
+        if g >= 0:
+            member[fill[g]] = i
+            fill[g] += 1
+    n_group = 0
+    n_own = 0
+    for g in range(G):
+        for n in range(ev_n[g]):
+            if ev_part[g, n] >= 0:
+                n_own += 1
+            else:
+                for j in range(start[g], start[g + 1]):
+                    if not exit_t[member[j]] <= ev_t[g, n]:
+                        n_group += 1
+    out_t = np.empty(n_group + n_own)
+    out_kind = np.empty(n_group + n_own, np.int8)
+    out_part = np.empty(n_group + n_own, np.int64)
+    a = 0
+    b = n_group
+    for g in range(G):
+        for n in range(ev_n[g]):
+            t = ev_t[g, n]
+            if ev_part[g, n] >= 0:
+                out_t[b] = t
+                out_kind[b] = ev_kind[g, n]
+                out_part[b] = ev_part[g, n]
+                b += 1
+            else:
+                for j in range(start[g], start[g + 1]):
+                    i = member[j]
+                    if not exit_t[i] <= t:
+                        out_t[a] = t
+                        out_kind[a] = ev_kind[g, n]
+                        out_part[a] = i
+                        a += 1
+    return out_t, out_kind, out_part
+
+
+@njit(cache=True)
+def stable_time_order(t):
+    """``np.argsort(t, kind="stable")`` for event times (finite), in linear expected time: the
+    times are spread over buckets in index order, then each bucket is sorted stably."""
+    n = t.shape[0]
+    if n == 0:
+        return np.zeros(0, np.int64)
+    lo = t[0]
+    hi = t[0]
+    for i in range(n):
+        if not math.isfinite(t[i]):
+            return np.argsort(t, kind="mergesort")
+        lo = min(lo, t[i])
+        hi = max(hi, t[i])
+    if not hi > lo:
+        return np.arange(n)
+    nb = n + 1  # event times cluster at the same phases of the carrier's cycle
+    scale = nb / (hi - lo)
+    bucket = np.empty(n, np.int64)
+    start = np.zeros(nb + 1, np.int64)
+    for i in range(n):
+        b = min(int((t[i] - lo) * scale), nb - 1)
+        bucket[i] = b
+        start[b + 1] += 1
+    for b in range(nb):
+        start[b + 1] += start[b]
+    fill = start[:nb].copy()
+    order = np.empty(n, np.int64)
+    key = np.empty(n)  # the times in bucket order, sorted in place with the order
+    for i in range(n):
+        q = fill[bucket[i]]
+        order[q] = i
+        key[q] = t[i]
+        fill[bucket[i]] = q + 1
+    for b in range(nb):
+        s = start[b]
+        e = start[b + 1]
+        if e - s > 32:
+            idx = np.argsort(key[s:e], kind="mergesort")
+            order[s:e] = order[s:e][idx]
+            continue
+        for j in range(s + 1, e):
+            cur = order[j]
+            tc = key[j]
+            q = j - 1
+            while q >= s and key[q] > tc:
+                order[q + 1] = order[q]
+                key[q + 1] = key[q]
+                q -= 1
+            order[q + 1] = cur
+            key[q + 1] = tc
+    return order

@@ -630,7 +630,7 @@ class FeederSimulator:
         event_t = np.concatenate([c[0] for c in chunks])
         event_kind = np.concatenate([c[1] for c in chunks]).astype(np.int8)
         event_part = np.concatenate([c[2] for c in chunks]).astype(np.int64)
-        order = np.argsort(event_t, kind="stable")
+        order = _k.stable_time_order(event_t)
         return SimulationResult(
             t_s=samples,
             carrier_x_m=out_cx,
@@ -753,6 +753,7 @@ class FeederSimulator:
         for k0 in range(0, max(n_total, 1), self.pieces_per_pass):
             batch = np.ascontiguousarray(pieces[k0 : k0 + self.pieces_per_pass])
             nb = batch.shape[0]
+            tables = _k.piece_tables(batch, nb)  # shared by every group of the pass
             final = k0 + nb >= n_total
             t_stop = t_end if final else float(pieces[k0 + nb, _k.P_T0])
             ns0 = int(np.searchsorted(samples, batch[0, _k.P_T0], side="left")) if nb else 0
@@ -772,7 +773,7 @@ class FeederSimulator:
                     numba.set_num_threads(1)
                 try:
                     _k.advance_groups(
-                        batch, nb, track, t_stop, samples, ns0, out_cx, out_cv,
+                        batch, nb, *tables, track, t_stop, samples, ns0, out_cx, out_cv,
                         g.L, g.D, g.mass, g.u, g.y, g.slip, g.lead, g.phase, g.head,
                         m.group, m.next, m.offset, m.mass, m.slip0, m.exit_t,
                         out_px, out_pv, out_pp, ev_t, ev_kind, ev_part, ev_n, status,
@@ -791,7 +792,9 @@ class FeederSimulator:
                         "one instant without progress"
                     )
                 break
-            chunks.append(_expand_group_events(ev_t, ev_kind, ev_part, ev_n, members_before, m))
+            chunks.append(
+                _k.expand_group_events(ev_t, ev_kind, ev_part, ev_n, members_before, m.exit_t)
+            )
             if final:
                 break
 
@@ -927,42 +930,6 @@ class _Members:
             arr = getattr(self, name)
             setattr(self, name, np.concatenate([arr, np.full(1, value, arr.dtype)]))
         self.size += 1
-
-
-def _expand_group_events(
-    ev_t: F64,
-    ev_kind: I8,
-    ev_part: I64,
-    ev_n: I64,
-    members_before: I64,
-    m: _Members,
-) -> tuple[F64, I8, I64]:
-    """Per-group event rows -> one event per member (group events) or the member itself (exits)."""
-    G, cap = ev_t.shape
-    valid = np.arange(cap)[None, :] < ev_n[:, None]
-    e_group = np.broadcast_to(np.arange(G)[:, None], (G, cap))[valid]
-    e_t, e_kind, e_part = ev_t[valid], ev_kind[valid], ev_part[valid]
-    own = e_part >= 0
-    # members of each group at the start of the pass, ordered by group
-    mem = np.flatnonzero(members_before >= 0)
-    order = np.argsort(members_before[mem], kind="stable")
-    mem_sorted = mem[order]
-    counts = np.bincount(members_before[mem], minlength=G)
-    starts = np.concatenate([[0], np.cumsum(counts)[:-1]])
-    grp = ~own
-    rep = counts[e_group[grp]]
-    total = int(rep.sum())
-    offsets = np.arange(total) - np.repeat(np.cumsum(rep) - rep, rep)
-    who = mem_sorted[np.repeat(starts[e_group[grp]], rep) + offsets]
-    t_rep = np.repeat(e_t[grp], rep)
-    k_rep = np.repeat(e_kind[grp], rep)
-    gone = m.exit_t[who]
-    keep = ~(gone <= t_rep)
-    return (
-        np.concatenate([t_rep[keep], e_t[own]]),
-        np.concatenate([k_rep[keep], e_kind[own]]).astype(np.int8),
-        np.concatenate([who[keep], e_part[own]]).astype(np.int64),
-    )
 
 
 # -- one-shot entry points -----------------------------------------------------------------

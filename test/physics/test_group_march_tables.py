@@ -1,0 +1,206 @@
+"""The group march's node tables and cell test, and the event expansion and ordering kernels."""
+
+from __future__ import annotations
+
+import numpy as np
+import pytest
+
+from feeder_ros.physics import sharp_solver as k
+from feeder_ros.physics.parameters import FeederParameters
+from feeder_ros.physics.simulation import FeederSimulator, PartSpec
+
+
+def _distinct_parts(count: int, seed: int) -> list[PartSpec]:
+    rng = np.random.default_rng(seed)
+    mu_s = rng.uniform(0.15, 0.3, count)
+    mu_d = mu_s * rng.uniform(0.4, 0.9, count)
+    return [
+        PartSpec(position_m=float(x), static_friction=float(s), kinetic_friction=float(d))
+        for x, s, d in zip(rng.uniform(0.0, 0.002, count), mu_s, mu_d, strict=True)
+    ]
+
+
+def test_node_tables_hold_the_carrier_and_bound_it(monkeypatch: pytest.MonkeyPatch) -> None:
+    captured = []
+    real = k.piece_tables
+
+    def spy(pieces: np.ndarray, n: int) -> tuple[np.ndarray, ...]:
+        out: tuple[np.ndarray, ...] = real(pieces, n)
+        captured.append((pieces[:n].copy(), out))
+        return out
+
+    monkeypatch.setattr(k, "piece_tables", spy)
+    params = FeederParameters(drive_amplitude_n=40.0, damping_ns_per_m=10.0)
+    sim = FeederSimulator(params, _distinct_parts(6, 1))
+    sim.parallel_min_groups = 1
+    sim.advance(1.0)
+    (pieces, (start, h, tab, bnd)) = captured[0]
+    n = pieces.shape[0]
+    assert n > 10
+    assert start[-1] == tab.shape[0]
+    times = []
+    for p in range(n):
+        count = start[p + 1] - start[p]
+        assert count >= 2  # no held piece with displacement switching
+        local = np.arange(count) * h[p]
+        local[-1] = pieces[p, k.P_LEN]
+        # nodes at most NODE_RAD of the fastest rate apart
+        assert h[p] <= pieces[p, k.P_LEN] / max(count - 1, 1) * (1 + 1e-12)
+        times.append(pieces[p, k.P_T0] + local)
+        for r in range(k.TAB_WIDTH):
+            rows = tab[start[p] : start[p + 1], r]
+            assert np.all(np.abs(rows) <= bnd[p, r] * (1 + 1e-12))
+    t = np.concatenate(times)
+    ref = FeederSimulator(params).advance(1.0, np.maximum.accumulate(t))
+    for r, values in enumerate((ref.carrier_x_m, ref.carrier_v_mps, ref.carrier_a_mps2)):
+        scale = float(np.max(np.abs(values)))
+        np.testing.assert_allclose(tab[:, r], values, rtol=0.0, atol=1e-12 * scale)
+    # the jerk column is the slope of the acceleration column
+    inner = np.diff(t) > 0
+    slope = np.diff(tab[:, 2])[inner] / np.diff(t)[inner]
+    mid_jerk = 0.5 * (tab[1:, 3] + tab[:-1, 3])[inner]
+    scale = float(np.max(np.abs(tab[:, 3])))
+    np.testing.assert_allclose(slope, mid_jerk, rtol=0.0, atol=0.05 * scale)
+
+
+def _wave(coef: tuple[float, ...], x: np.ndarray | float, d: int) -> np.ndarray:
+    """``d``-th derivative of ``amp*sin(omega*x + phi) + offset + slope*x``."""
+    amp, omega, phi, slope, offset = coef
+    base = amp * omega**d * np.sin(omega * np.asarray(x) + phi + d * np.pi / 2)
+    if d == 0:
+        return np.asarray(base + offset + slope * np.asarray(x))
+    return np.asarray(base + (slope if d == 1 else 0.0))
+
+
+def test_cell_classification_agrees_with_dense_sampling() -> None:
+    """Random sinusoid-plus-line functions on a cell: NONE must have no sign change on a fine
+    grid, ROOT exactly one; every outcome occurs."""
+    rng = np.random.default_rng(5)
+    seen = {k.CELL_NONE: 0, k.CELL_ROOT: 0, k.CELL_UNSURE: 0}
+    s = np.linspace(0.0, 1.0, 4001)
+    for _ in range(4000):
+        amp, omega = rng.uniform(0.1, 1.0), rng.uniform(0.5, 6.0)
+        phi, slope = rng.uniform(0, 2 * np.pi), rng.uniform(-1.0, 1.0)
+        h = rng.uniform(0.05, 1.0)
+        released = rng.random() < 0.2
+        offset = -amp * np.sin(phi) if released else rng.uniform(-0.3, 1.2)
+
+        coef = (amp, omega, phi, slope, offset)
+        fa, fb = float(_wave(coef, 0.0, 0)), float(_wave(coef, h, 0))
+        if released:
+            fa = 0.0
+        elif fa <= 1e-12:
+            continue  # only released functions start on (or below) their zero
+        code = k._cell(
+            fa,
+            fb,
+            float(_wave(coef, 0.0, 1)),
+            float(_wave(coef, h, 1)),
+            float(_wave(coef, 0.0, 2)),
+            float(_wave(coef, h, 2)),
+            amp * omega**2,
+            amp * omega**3,
+            h,
+            1e-14,
+            1e-10,
+        )
+        seen[code] += 1
+        values = _wave(coef, s * h, 0)[1:]  # (a, a + h]
+        changes = np.count_nonzero(np.diff(np.sign(values)) != 0) + (values[0] <= 0.0)
+        if code == k.CELL_NONE:
+            assert np.all(values > 0.0), (coef, h, released)
+        elif code == k.CELL_ROOT:
+            assert changes == 1, (coef, h, released)
+            assert values[-1] < 0.0, (coef, h, released)
+    assert min(seen.values()) > 50, seen
+
+
+def _expand_reference(
+    ev_t: np.ndarray,
+    ev_kind: np.ndarray,
+    ev_part: np.ndarray,
+    ev_n: np.ndarray,
+    before: np.ndarray,
+    exit_t: np.ndarray,
+) -> tuple[list[float], list[int], list[int]]:
+    group_rows: list[tuple[float, int, int]] = []
+    own_rows: list[tuple[float, int, int]] = []
+    for g in range(ev_t.shape[0]):
+        members = [i for i in range(before.size) if before[i] == g]
+        for n in range(ev_n[g]):
+            t = float(ev_t[g, n])
+            if ev_part[g, n] >= 0:
+                own_rows.append((t, int(ev_kind[g, n]), int(ev_part[g, n])))
+            else:
+                group_rows += [(t, int(ev_kind[g, n]), i) for i in members if not exit_t[i] <= t]
+    rows = group_rows + own_rows
+    return [r[0] for r in rows], [r[1] for r in rows], [r[2] for r in rows]
+
+
+def test_group_events_expand_to_the_members_present() -> None:
+    rng = np.random.default_rng(3)
+    G, N, cap = 5, 17, 9
+    before = rng.integers(-1, G, N)
+    exit_t = np.where(rng.random(N) < 0.3, rng.uniform(0, 1, N), np.nan)
+    ev_n = rng.integers(0, cap + 1, G)
+    ev_t = np.sort(rng.uniform(0, 1, (G, cap)), axis=1)
+    ev_kind = rng.integers(0, 6, (G, cap)).astype(np.int8)
+    ev_part = np.where(rng.random((G, cap)) < 0.2, rng.integers(0, N, (G, cap)), -1)
+    t, kind, part = k.expand_group_events(ev_t, ev_kind, ev_part, ev_n, before, exit_t)
+    rt, rk, rp = _expand_reference(ev_t, ev_kind, ev_part, ev_n, before, exit_t)
+    assert t.tolist() == rt
+    assert kind.tolist() == rk
+    assert part.tolist() == rp
+    assert len(rp) > 20
+
+
+@pytest.mark.parametrize(
+    "times",
+    [
+        np.random.default_rng(1).uniform(0, 10, 5000),
+        np.repeat(np.random.default_rng(2).uniform(0, 1, 40), 300),  # long runs of equal times
+        np.concatenate([np.full(100, 3.0), np.linspace(0, 1, 50), np.full(7, 3.0)]),
+        np.round(np.random.default_rng(4).normal(0, 1e-3, 3000), 5) + 2.0,  # clustered
+        np.full(10, 1.5),
+        np.array([2.0]),
+        np.zeros(0),
+    ],
+)
+def test_stable_time_order_equals_a_stable_argsort(times: np.ndarray) -> None:
+    assert np.array_equal(k.stable_time_order(times), np.argsort(times, kind="stable"))
+
+
+def test_stable_time_order_falls_back_on_non_finite_times() -> None:
+    times = np.array([3.0, np.nan, 1.0, np.inf, 1.0])
+    assert np.array_equal(k.stable_time_order(times), np.argsort(times, kind="stable"))
+
+
+@pytest.mark.parametrize(
+    "changes",
+    [
+        {},
+        {"damping_ns_per_m": 30.0},
+        {"stiffness_switch": "velocity", "damping_ns_per_m": 5.0},  # held pieces: no table
+        {"drive_amplitude_n": 12.0},  # near the stick limit: many near-miss cells
+    ],
+)
+def test_table_march_equals_the_global_event_loop(changes: dict[str, object]) -> None:
+    params = FeederParameters(drive_amplitude_n=40.0, track_length_m=0.004).with_changes(**changes)
+    specs = _distinct_parts(24, 7)
+    times = np.arange(1501) / 1000.0
+    serial = FeederSimulator(params, specs)
+    serial.parallel_min_groups = 10**9
+    one = serial.advance(1.5, times)
+    table = FeederSimulator(params, specs)
+    table.parallel_min_groups = 1
+    two = table.advance(1.5, times)
+    assert one.event_t_s.size == two.event_t_s.size > 24
+    np.testing.assert_array_equal(one.part_phase, two.part_phase)
+    np.testing.assert_allclose(two.part_x_m, one.part_x_m, rtol=0, atol=1e-13)
+    np.testing.assert_allclose(two.part_v_mps, one.part_v_mps, rtol=0, atol=1e-11)
+    a = np.lexsort((one.event_part, one.event_kind, one.event_t_s))
+    b = np.lexsort((two.event_part, two.event_kind, two.event_t_s))
+    np.testing.assert_array_equal(one.event_kind[a], two.event_kind[b])
+    np.testing.assert_array_equal(one.event_part[a], two.event_part[b])
+    np.testing.assert_allclose(one.event_t_s[a], two.event_t_s[b], rtol=0, atol=1e-12)
+    assert np.all(np.diff(two.event_t_s) >= 0.0)
