@@ -42,7 +42,10 @@ carries one velocity history; its members differ only by a track offset. With tw
 group also carries the summed mass of its members. :func:`advance` runs carrier and groups in one
 event loop (any coupling); with one-way coupling :func:`advance` can instead record the carrier's
 closed-form pieces, along which :func:`advance_groups` marches every group independently, in
-parallel.
+parallel. There each piece is tabulated once for all groups (:func:`piece_tables`): a group passes
+the cells between nodes on their end values (:func:`_cell`), solves a cell holding one root by a
+bracketed Halley iteration on the closed form, halves undecided cells with exact evaluations, and
+falls back to the safe steps above only when halving does not decide.
 """
 
 # mypy: disable-error-code="misc, no-untyped-def"
@@ -396,7 +399,7 @@ def _node_count_and_step(pieces, k):
     return cells + 1, T / cells
 
 
-@njit(cache=True, parallel=True)
+@njit(cache=True)
 def piece_tables(pieces, n_pieces):
     """Node tables of the recorded pieces, shared by all groups: ``(node_start, node_h, tab,
     bnd)``. Piece ``k`` has nodes ``node_start[k] .. node_start[k + 1] - 1`` at local times
@@ -410,7 +413,7 @@ def piece_tables(pieces, n_pieces):
         node_h[k] = h
     tab = np.empty((node_start[n_pieces], TAB_WIDTH))
     bnd = np.zeros((n_pieces, 6))
-    for k in prange(n_pieces):
+    for k in range(n_pieces):  # serial: a pass has few pieces, each costs microseconds
         rows = np.zeros((6, 5))
         for r in range(6):
             for j in range(5):
