@@ -2073,10 +2073,14 @@ def expand_group_events(ev_t, ev_kind, ev_part, ev_n, members_before, exit_t):
     return out_t, out_kind, out_part
 
 
-@njit(cache=True)
+SORT_CHUNKS = 2  # input chunks bucketed in parallel by stable_time_order
+
+
+@njit(cache=True, parallel=True)
 def stable_time_order(t):
     """``np.argsort(t, kind="stable")`` for event times (finite), in linear expected time: the
-    times are spread over buckets in index order, then each bucket is sorted stably."""
+    times are spread over buckets (chunks of the input in parallel, each chunk's elements after
+    the previous chunk's in a bucket), then the buckets are sorted stably, in parallel."""
     n = t.shape[0]
     if n == 0:
         return np.zeros(0, np.int64)
@@ -2092,46 +2096,60 @@ def stable_time_order(t):
         hi = max(hi, t[i])
     if ordered:
         return np.arange(n)
-    nb = n + 1  # event times cluster at the same phases of the carrier's cycle
+    nb = n // 2 + 1  # measured best: event times cluster at phases of the carrier cycle
     scale = nb / (hi - lo)
+    C = SORT_CHUNKS
     bucket = np.empty(n, np.int64)
-    start = np.zeros(nb + 1, np.int64)
-    for i in range(n):
-        b = min(int((t[i] - lo) * scale), nb - 1)
-        bucket[i] = b
-        start[b + 1] += 1
+    count = np.zeros((C, nb), np.int64)
+    for c in prange(C):
+        for i in range(c * n // C, (c + 1) * n // C):
+            b = min(int((t[i] - lo) * scale), nb - 1)
+            bucket[i] = b
+            count[c, b] += 1
+    start = np.empty(nb + 1, np.int64)
+    q = 0
     for b in range(nb):
-        start[b + 1] += start[b]
-    fill = start[:nb].copy()
+        start[b] = q
+        for c in range(C):
+            m = count[c, b]
+            count[c, b] = q  # where chunk c's elements of bucket b go
+            q += m
+    start[nb] = n
     order = np.empty(n, np.int64)
     key = np.empty(n)  # the times in bucket order, sorted in place with the order
-    for i in range(n):
-        q = fill[bucket[i]]
-        order[q] = i
-        key[q] = t[i]
-        fill[bucket[i]] = q + 1
-    for b in range(nb):
-        s = start[b]
-        e = start[b + 1]
-        ordered = True
-        for j in range(s + 1, e):
-            if key[j] < key[j - 1]:
-                ordered = False
-                break
-        if ordered:
-            continue
-        if e - s > 32:
-            idx = np.argsort(key[s:e], kind="mergesort")
-            order[s:e] = order[s:e][idx]
-            continue
-        for j in range(s + 1, e):
-            cur = order[j]
-            tc = key[j]
-            q = j - 1
-            while q >= s and key[q] > tc:
-                order[q + 1] = order[q]
-                key[q + 1] = key[q]
-                q -= 1
-            order[q + 1] = cur
-            key[q + 1] = tc
+    for c in prange(C):
+        for i in range(c * n // C, (c + 1) * n // C):
+            b = bucket[i]
+            q = count[c, b]
+            order[q] = i
+            key[q] = t[i]
+            count[c, b] = q + 1
+    for c in prange(C):
+        for b in range(c * nb // C, (c + 1) * nb // C):
+            _sort_bucket(order, key, start[b], start[b + 1])
     return order
+
+
+@njit(cache=True)
+def _sort_bucket(order, key, s, e):
+    """Stable sort of ``order[s:e]`` by ``key[s:e]`` (both permuted in place)."""
+    for j in range(s + 1, e):
+        if key[j] < key[j - 1]:
+            break
+    else:
+        return
+    if e - s > 32:
+        idx = np.argsort(key[s:e], kind="mergesort")
+        order[s:e] = order[s:e][idx]
+        key[s:e] = key[s:e][idx]
+        return
+    for j in range(s + 1, e):
+        cur = order[j]
+        tc = key[j]
+        q = j - 1
+        while q >= s and key[q] > tc:
+            order[q + 1] = order[q]
+            key[q + 1] = key[q]
+            q -= 1
+        order[q + 1] = cur
+        key[q + 1] = tc
