@@ -182,6 +182,7 @@ def test_stable_time_order_falls_back_on_non_finite_times() -> None:
         {"damping_ns_per_m": 30.0},
         {"stiffness_switch": "velocity", "damping_ns_per_m": 5.0},  # held pieces: no table
         {"drive_amplitude_n": 12.0},  # near the stick limit: many near-miss cells
+        {"drive_amplitude_n": 400.0, "damping_ns_per_m": 1500.0},  # over-damped branch pieces
     ],
 )
 def test_table_march_equals_the_global_event_loop(changes: dict[str, object]) -> None:
