@@ -772,7 +772,7 @@ class FeederSimulator:
                 if G * nb < SMALL_PARALLEL_WORK:
                     numba.set_num_threads(1)
                 try:
-                    _k.advance_groups(
+                    _k.advance_groups(  # type: ignore[call-arg]
                         batch, nb, *tables, track, t_stop, samples, ns0, out_cx, out_cv,
                         g.L, g.D, g.mass, g.u, g.y, g.slip, g.lead, g.phase, g.head,
                         m.group, m.next, m.offset, m.mass, m.slip0, m.exit_t,

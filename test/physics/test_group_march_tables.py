@@ -175,30 +175,48 @@ def test_stable_time_order_falls_back_on_non_finite_times() -> None:
     assert np.array_equal(k.stable_time_order(times), np.argsort(times, kind="stable"))
 
 
+def _shared_friction_parts() -> list[PartSpec]:
+    """Eight parts of three frictions: groups of several members."""
+    rng = np.random.default_rng(11)
+    return [
+        PartSpec(position_m=float(x), static_friction=float(mu), kinetic_friction=float(mu) / 2)
+        for x, mu in zip(rng.uniform(0, 0.002, 8), rng.choice([0.15, 0.2, 0.25], 8), strict=True)
+    ]
+
+
 @pytest.mark.parametrize(
-    "changes",
+    ("changes", "shared", "pieces_per_pass"),
     [
-        {},
-        {"damping_ns_per_m": 30.0},
-        {"stiffness_switch": "velocity", "damping_ns_per_m": 5.0},  # held pieces: no table
-        {"drive_amplitude_n": 12.0},  # near the stick limit: many near-miss cells
-        {"drive_amplitude_n": 400.0, "damping_ns_per_m": 1500.0},  # over-damped branch pieces
+        ({}, False, 512),
+        ({"damping_ns_per_m": 30.0}, False, 512),
+        # held pieces (velocity switching): no table there
+        ({"stiffness_switch": "velocity", "damping_ns_per_m": 5.0}, False, 512),
+        ({"drive_amplitude_n": 12.0}, False, 512),  # near the stick limit: near-miss cells
+        ({"drive_amplitude_n": 400.0, "damping_ns_per_m": 1500.0}, False, 512),  # over-damped
+        ({"track_length_m": 0.003}, True, 7),  # groups of several members, exits, many passes
     ],
 )
-def test_table_march_equals_the_global_event_loop(changes: dict[str, object]) -> None:
+def test_table_march_equals_the_global_event_loop(
+    changes: dict[str, object], shared: bool, pieces_per_pass: int
+) -> None:
     params = FeederParameters(drive_amplitude_n=40.0, track_length_m=0.004).with_changes(**changes)
-    specs = _distinct_parts(24, 7)
-    times = np.arange(1501) / 1000.0
+    specs = _shared_friction_parts() if shared else _distinct_parts(24, 7)
+    times = np.arange(2001) / 1000.0
     serial = FeederSimulator(params, specs)
     serial.parallel_min_groups = 10**9
-    one = serial.advance(1.5, times)
+    one = serial.advance(2.0, times)
     table = FeederSimulator(params, specs)
     table.parallel_min_groups = 1
-    two = table.advance(1.5, times)
+    table.pieces_per_pass = pieces_per_pass
+    two = table.advance(2.0, times)
     assert one.event_t_s.size == two.event_t_s.size > 24
+    assert one.exited_count() == two.exited_count()
+    if shared:
+        assert two.exited_count() > 0
     np.testing.assert_array_equal(one.part_phase, two.part_phase)
     np.testing.assert_allclose(two.part_x_m, one.part_x_m, rtol=0, atol=1e-13)
     np.testing.assert_allclose(two.part_v_mps, one.part_v_mps, rtol=0, atol=1e-11)
+    np.testing.assert_allclose(two.part_slip_time_s, one.part_slip_time_s, rtol=0, atol=1e-12)
     a = np.lexsort((one.event_part, one.event_kind, one.event_t_s))
     b = np.lexsort((two.event_part, two.event_kind, two.event_t_s))
     np.testing.assert_array_equal(one.event_kind[a], two.event_kind[b])

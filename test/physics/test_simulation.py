@@ -226,31 +226,6 @@ def test_bad_input_is_refused_with_the_value_named(
         call(case_study)
 
 
-def test_parallel_group_march_equals_the_global_event_loop() -> None:
-    params = FeederParameters(drive_amplitude_n=40.0, track_length_m=0.003)
-    rng = np.random.default_rng(11)
-    specs = [
-        PartSpec(position_m=float(x), static_friction=float(mu), kinetic_friction=float(mu) / 2)
-        for x, mu in zip(rng.uniform(0, 0.002, 8), rng.choice([0.15, 0.2, 0.25], 8), strict=True)
-    ]
-    times = np.arange(2001) / 1000.0
-    serial = FeederSimulator(params, specs)
-    serial.parallel_min_groups = 10**9
-    one = serial.advance(2.0, times)
-    parallel = FeederSimulator(params, specs)
-    parallel.parallel_min_groups = 1
-    parallel.pieces_per_pass = 7  # many passes
-    two = parallel.advance(2.0, times)
-    assert one.exited_count() == two.exited_count() > 0
-    np.testing.assert_array_equal(one.part_phase, two.part_phase)
-    np.testing.assert_allclose(two.part_x_m, one.part_x_m, rtol=0, atol=1e-13)
-    np.testing.assert_allclose(two.part_slip_time_s, one.part_slip_time_s, rtol=0, atol=1e-12)
-    a = np.lexsort((one.event_part, one.event_kind, one.event_t_s))
-    b = np.lexsort((two.event_part, two.event_kind, two.event_t_s))
-    np.testing.assert_array_equal(one.event_part[a], two.event_part[b])
-    np.testing.assert_allclose(one.event_t_s[a], two.event_t_s[b], rtol=0, atol=1e-11)
-
-
 def test_switching_variable_can_change_mid_run(case_study: FeederParameters) -> None:
     sim = FeederSimulator(case_study)
     sim.advance(0.237)
