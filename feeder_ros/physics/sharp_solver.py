@@ -2074,6 +2074,7 @@ def expand_group_events(ev_t, ev_kind, ev_part, ev_n, members_before, exit_t):
 
 
 SORT_CHUNKS = 2  # input chunks bucketed in parallel by stable_time_order
+SORT_SERIAL_BELOW = 4096  # fewer events are sorted by a plain stable argsort
 
 
 @njit(cache=True, parallel=True)
@@ -2096,6 +2097,8 @@ def stable_time_order(t):
         hi = max(hi, t[i])
     if ordered:
         return np.arange(n)
+    if n < SORT_SERIAL_BELOW:
+        return np.argsort(t, kind="mergesort")  # no parallel region for a few events
     nb = n // 2 + 1  # measured best: event times cluster at phases of the carrier cycle
     scale = nb / (hi - lo)
     C = SORT_CHUNKS

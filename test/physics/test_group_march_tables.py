@@ -158,6 +158,7 @@ def test_group_events_expand_to_the_members_present() -> None:
     "times",
     [
         np.random.default_rng(1).uniform(0, 10, 5000),
+        np.random.default_rng(6).uniform(0, 10, 300),  # below the parallel bucket sort's size
         np.repeat(np.random.default_rng(2).uniform(0, 1, 40), 300),  # long runs of equal times
         np.concatenate([np.full(100, 3.0), np.linspace(0, 1, 50), np.full(7, 3.0)]),
         np.round(np.random.default_rng(4).normal(0, 1e-3, 3000), 5) + 2.0,  # clustered
