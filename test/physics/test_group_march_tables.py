@@ -44,8 +44,14 @@ def test_node_tables_hold_the_carrier_and_bound_it(monkeypatch: pytest.MonkeyPat
         assert count >= 2  # no held piece with displacement switching
         local = np.arange(count) * h[p]
         local[-1] = pieces[p, k.P_LEN]
-        # nodes at most NODE_RAD of the fastest rate apart
-        assert h[p] <= pieces[p, k.P_LEN] / max(count - 1, 1) * (1 + 1e-12)
+        # nodes at most NODE_RAD of the piece's fastest rate (drive or homogeneous) apart
+        sigma, lam, root = pieces[p, k.P_SIGMA], pieces[p, k.P_LAM], pieces[p, k.P_ROOT]
+        natural = np.hypot(sigma, root) if lam < 0.0 else abs(sigma) + root
+        rate = max(pieces[p, k.P_W], natural)
+        assert rate > 0.0
+        assert h[p] * rate <= k.NODE_RAD * (1 + 1e-12)
+        if count > 2:  # more than one cell: not needlessly fine either
+            assert h[p] * rate > 0.5 * k.NODE_RAD
         times.append(pieces[p, k.P_T0] + local)
         for r in range(k.TAB_WIDTH):
             rows = tab[start[p] : start[p + 1], r]
