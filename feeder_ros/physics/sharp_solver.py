@@ -391,9 +391,9 @@ def _node_count_and_step(pieces, k):
     sigma = pieces[k, P_SIGMA]
     lam = pieces[k, P_LAM]
     root = pieces[k, P_ROOT]
-    rate = max(pieces[k, P_W], abs(sigma) + (root if lam >= 0.0 else 0.0))
-    if lam < 0.0:
-        rate = max(rate, math.sqrt(sigma * sigma + root * root))
+    # the fastest rate of the drive and of the homogeneous basis (|sigma -+ i*wd| or |sigma| + g)
+    natural = math.sqrt(sigma * sigma + root * root) if lam < 0.0 else abs(sigma) + root
+    rate = max(pieces[k, P_W], natural)
     cells = 1 if rate == 0.0 else math.ceil(T * rate / NODE_RAD)
     cells = min(max(cells, 1), NODE_MAX - 1)
     return cells + 1, T / cells
