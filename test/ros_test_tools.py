@@ -97,22 +97,46 @@ def call(node: Node, service_type: Any, name: str, request: Any, timeout_s: floa
         node.destroy_client(client)
 
 
+class DrainedProcess(subprocess.Popen[str]):
+    """A child process whose stdout and stderr are read continuously into memory by a thread.
+
+    A node's output must never sit in an unread pipe: once a pipe's 64 KiB buffer is full, the
+    node blocks in its next log call and stops publishing (a stalled clock, a silent topic).
+    :meth:`output` returns everything printed so far."""
+
+    def __init__(self, command: Sequence[str], **kwargs: Any) -> None:
+        super().__init__(
+            list(command), stdout=subprocess.PIPE, stderr=subprocess.STDOUT, text=True, **kwargs
+        )
+        self._lines: list[str] = []
+        self._reader = threading.Thread(target=self._drain, daemon=True)
+        self._reader.start()
+
+    def _drain(self) -> None:
+        assert self.stdout is not None
+        for line in self.stdout:
+            self._lines.append(line)
+
+    def output(self) -> str:
+        """Everything the process printed so far (all of it once it has exited)."""
+        if self.poll() is not None:
+            self._reader.join(timeout=5)
+        return "".join(self._lines)
+
+
 @contextmanager
 def running(
     command: Sequence[str], env: dict[str, str] | None = None, **kwargs: Any
-) -> Iterator[subprocess.Popen[str]]:
-    """Start a process; on exit interrupt it (Ctrl-C) and insist it ended cleanly."""
-    process = subprocess.Popen(
-        list(command),
-        env=env,
-        stdout=subprocess.PIPE,
-        stderr=subprocess.STDOUT,
-        text=True,
-        **kwargs,
-    )
+) -> Iterator[DrainedProcess]:
+    """Start a process; on exit interrupt it (Ctrl-C) and insist it ended cleanly. If the test
+    failed, the end of the process's output is printed (pytest shows it with the failure)."""
+    process = DrainedProcess(command, env=env, **kwargs)
+    failed = True
     try:
         yield process
+        failed = False
     finally:
+        stuck = False
         if process.poll() is None:
             process.send_signal(2)  # SIGINT, as Ctrl-C
             try:
@@ -120,7 +144,12 @@ def running(
             except subprocess.TimeoutExpired:
                 process.kill()
                 process.wait()
-                raise AssertionError(f"{command[0]} did not stop on Ctrl-C within 10 s") from None
+                stuck = True
+        if failed or stuck:
+            tail = process.output()[-4000:]
+            print(f"--- output of {Path(command[0]).name} (exit {process.returncode}):\n{tail}")
+        if stuck:
+            raise AssertionError(f"{command[0]} did not stop on Ctrl-C within 10 s")
 
 
 def python_command(*args: str) -> list[str]:

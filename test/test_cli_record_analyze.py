@@ -87,8 +87,8 @@ def test_record_a_simulator_and_read_the_bag_back(tmp_path: Path) -> None:
         with running(recorder) as process:
             assert wait_until(lambda: (bag / "metadata.yaml").exists(), 20), process.poll()
             time.sleep(6.0)  # discovery (slow on a loaded machine), then seconds of data
-        assert process.returncode == 0, process.stdout.read() if process.stdout else ""
-        output = process.stdout.read() if process.stdout else ""
+        assert process.returncode == 0, process.output()
+        output = process.output()
         time.sleep(0.5)  # the probe goes on receiving after the recorder stopped
 
     assert f"into {bag}" in output

@@ -149,4 +149,4 @@ def test_ros2_run_resolves_and_honours_ros_args(workspace: Path, executable: str
         )
         assert answer.values[0].bool_value is True
         assert process.poll() is None, "node exited early"
-    assert process.returncode == 0, process.stdout.read() if process.stdout else ""
+    assert process.returncode == 0, process.output()
