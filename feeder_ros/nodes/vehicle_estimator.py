@@ -25,6 +25,7 @@ from rclpy.exceptions import InvalidHandle
 from rclpy.node import Node
 from rclpy.parameter import Parameter
 from rclpy.qos import QoSProfile, ReliabilityPolicy
+from rclpy.qos_overriding_options import QoSOverridingOptions
 from sensor_msgs.msg import Imu
 
 from feeder_ros.estimation.stick_slip_observer import PartModel
@@ -149,11 +150,16 @@ INTERFACE = NodeInterface(
         ),
     ),
     subscribes=(
-        TopicSpec("imu", "sensor_msgs/msg/Imu", "sensor data, depth 500", "carrier accelerometer"),
+        TopicSpec(
+            "imu",
+            "sensor_msgs/msg/Imu",
+            "sensor data, depth 500 (qos_overrides: reliability, history, depth)",
+            "carrier accelerometer",
+        ),
         TopicSpec(
             "imu/batch",
             "feeder_ros/msg/AccelerometerBatch",
-            "sensor data, depth 500",
+            "sensor data, depth 500 (qos_overrides: reliability, history, depth)",
             "the same as batches (high-rate sensors)",
         ),
         TopicSpec(
@@ -267,10 +273,19 @@ class VehicleEstimatorNode(Node):
             self.create_subscription(CarrierState, "carrier/state", self._on_state, RELIABLE_QOS)
         else:
             # raw: at 1 kHz, building an Imu object per sample costs more than the estimate
+            # best effort by default (matches any sensor driver); qos_overrides parameters,
+            # e.g. `qos_overrides./feeder/imu.subscription.reliability:=reliable`, change it
+            overridable = QoSOverridingOptions.with_default_policies()
             self._imu_subscription = self.create_subscription(
-                Imu, "imu", self._on_imu, SENSOR_QOS, raw=True
+                Imu, "imu", self._on_imu, SENSOR_QOS, raw=True, qos_overriding_options=overridable
             )
-            self.create_subscription(AccelerometerBatch, "imu/batch", self._on_batch, SENSOR_QOS)
+            self.create_subscription(
+                AccelerometerBatch,
+                "imu/batch",
+                self._on_batch,
+                SENSOR_QOS,
+                qos_overriding_options=overridable,
+            )
         self.create_subscription(DriveCommand, "drive/command", self._on_command, COMMAND_QOS)
         self.create_timer(1.0 / self._values["publish_rate_hz"], self._estimate)
         self.create_timer(1.0, self._publish_diagnostics)

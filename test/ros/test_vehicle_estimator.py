@@ -136,7 +136,12 @@ def test_namespaced_feeders_side_by_side_estimate_their_own_true_speed() -> None
 
 def test_bad_samples_are_reported_not_averaged_in() -> None:
     ns = "/estimator_input"
-    command = [str(BIN / "vehicle_estimator"), "--ros-args", "-r", f"__ns:={ns}"]
+    # the sensor subscription is best effort unless overridden: reliable here, so that every
+    # sample the test sends arrives (the counts below are exact)
+    command = [
+        str(BIN / "vehicle_estimator"), "--ros-args", "-r", f"__ns:={ns}",
+        "-p", f"qos_overrides.{ns}/imu.subscription.reliability:=reliable",
+    ]  # fmt: skip
     with running(command), probe_node() as node:
         estimates: list[VehicleEstimate] = []
         diagnostics: list[DiagnosticArray] = []
@@ -146,6 +151,8 @@ def test_bad_samples_are_reported_not_averaged_in() -> None:
         drive = node.create_publisher(DriveCommand, f"{ns}/drive/command", 10)
         assert wait_until(lambda: imu.get_subscription_count() > 0, 20.0)
         assert wait_until(lambda: drive.get_subscription_count() > 0, 20.0)
+        readers = node.get_subscriptions_info_by_topic(f"{ns}/imu")
+        assert [r.qos_profile.reliability for r in readers] == [ReliabilityPolicy.RELIABLE]
 
         def own_status() -> DiagnosticStatus | None:
             for array in reversed(diagnostics):
@@ -183,8 +190,8 @@ def test_bad_samples_are_reported_not_averaged_in() -> None:
             if k in (700, 701, 702):
                 value = math.nan
             send(t, value)
-            if k % 50 == 0:
-                time.sleep(0.01)
+            if k % 10 == 0:
+                time.sleep(0.01)  # paced (~1 kHz): the reader's history holds 500 samples
 
         def reported(code: int) -> bool:
             return any(e.status == code for e in estimates)
@@ -193,7 +200,9 @@ def test_bad_samples_are_reported_not_averaged_in() -> None:
             (e.status, e.status_message) for e in estimates[-5:]
         ]
         bad = next(e for e in estimates if e.status == VehicleEstimate.STATUS_INVALID_SAMPLES)
-        assert "3" in bad.status_message  # names how many samples were dropped
+        assert bad.status_message.startswith("3 non-finite samples dropped;"), bad.status_message
+        # the only gap is the one the three dropped samples left (from k = 699 to 703)
+        assert "; gap of 0.008 s at t=1001.398000;" in bad.status_message, bad.status_message
         for estimate in estimates:
             assert not (math.isnan(estimate.mean_speed_mps) and estimate.mean_speed_confidence > 0)
 
