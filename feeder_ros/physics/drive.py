@@ -69,7 +69,8 @@ class DriveChange:
 class DriveSegments:
     """The applied drive as arrays, one entry per constant segment (what the solver consumes).
 
-    ``start_s[k]`` (``start_s[0] = 0``), angular frequency ``omega_rad_s[k]``, amplitude
+    ``start_s[k]`` (``start_s[0]`` is the schedule's start, 0 unless older changes were
+    forgotten), angular frequency ``omega_rad_s[k]`` (``2*pi*frequency_hz[k]``), amplitude
     ``amplitude_n[k]``, phase ``phase_rad[k]`` at ``start_s[k]``, and ``logged[k]``: 1 if segment
     ``k`` begins a user change (recorded as a DRIVE_CHANGE event), 0 for the inner steps of a ramp
     and for segment 0.
@@ -80,6 +81,7 @@ class DriveSegments:
     amplitude_n: npt.NDArray[np.float64]
     phase_rad: npt.NDArray[np.float64]
     logged: npt.NDArray[np.int8]
+    frequency_hz: npt.NDArray[np.float64]
 
     def index_at(self, time_s: float) -> int:
         """Index of the segment in force at ``time_s`` (segments are half-open ``[start,
@@ -99,12 +101,18 @@ class DriveSegments:
 
 @dataclass(frozen=True)
 class DriveSchedule:
-    """Initial frequency/amplitude at ``t = 0`` and a time-ordered tuple of :class:`DriveChange`."""
+    """Initial frequency/amplitude at ``t = 0`` and a time-ordered tuple of :class:`DriveChange`.
+
+    ``start_s``/``start_phase_rad``: where the schedule starts and the phase there (0, 0 for a
+    new schedule; later for one that forgot its older changes, :meth:`forget_before`). Before
+    ``start_s`` it describes nothing (queries there get the initial values)."""
 
     frequency_hz: float
     amplitude_n: float
     changes: tuple[DriveChange, ...] = ()
     ramp_step_s: float = DEFAULT_RAMP_STEP_S
+    start_s: float = 0.0
+    start_phase_rad: float = 0.0
     _segments: DriveSegments | None = field(default=None, init=False, repr=False, compare=False)
 
     def __post_init__(self) -> None:
@@ -118,6 +126,12 @@ class DriveSchedule:
         times = [change.time_s for change in changes]
         if times != sorted(times):
             raise DriveError(f"drive changes must be in time order, got times {times}")
+        object.__setattr__(self, "start_s", _check("start_s", self.start_s, True))
+        phase = self.start_phase_rad
+        if not (isinstance(phase, int | float) and 0.0 <= phase < TWO_PI):
+            raise DriveError(f"start_phase_rad={phase!r} must be in [0, 2*pi)")
+        if times and times[0] < self.start_s:
+            raise DriveError(f"a change at {times[0]!r} s is before start_s={self.start_s!r}")
         object.__setattr__(self, "changes", changes)
 
     @classmethod
@@ -135,7 +149,43 @@ class DriveSchedule:
         # A ramp still running at change.time_s is frozen at its current staircase value.
         if kept and kept[-1].time_s + kept[-1].ramp_s > change.time_s:
             kept.append(DriveChange(change.time_s, f0, a0, 0.0))
-        return DriveSchedule(self.frequency_hz, self.amplitude_n, (*kept, change), self.ramp_step_s)
+        return DriveSchedule(
+            self.frequency_hz,
+            self.amplitude_n,
+            (*kept, change),
+            self.ramp_step_s,
+            self.start_s,
+            self.start_phase_rad,
+        )
+
+    def forget_before(self, time_s: float) -> DriveSchedule:
+        """The same drive from ``time_s`` on, without the changes that only shaped it before.
+
+        The new schedule starts on the segment before the last change that took effect at or
+        before ``time_s``, with that segment's values and phase; that change and all later ones
+        are kept. Its segments from there on are the same numbers, bit for bit. A live
+        simulator calls this so that its schedule, rebuilt on every command, does not grow
+        with the length of the run. Returns ``self`` when there is nothing to forget.
+        """
+        seg = self.segments()
+        now = int(np.searchsorted(seg.start_s, time_s, side="right")) - 1  # segment in force
+        opened = np.flatnonzero(seg.logged[1 : now + 1])  # segments 1..now that begin a change
+        if opened.size == 0:
+            return self
+        first = int(opened[-1]) + 1  # the last change in force opens segment `first`
+        base = first - 1
+        opened_at = float(seg.start_s[first])
+        kept = tuple(change for change in self.changes if change.time_s >= opened_at)
+        if len(kept) == len(self.changes):
+            return self
+        return DriveSchedule(
+            float(seg.frequency_hz[base]),
+            float(seg.amplitude_n[base]),
+            kept,
+            self.ramp_step_s,
+            float(seg.start_s[base]),
+            float(seg.phase_rad[base]),
+        )
 
     def values_at(self, time_s: float) -> tuple[float, float]:
         """(frequency_hz, amplitude_n) of the applied (staircase) drive at ``time_s``."""
@@ -155,13 +205,13 @@ class DriveSchedule:
         return self._segments
 
     def _build(self) -> DriveSegments:
-        starts = [0.0]
+        starts = [self.start_s]
         freqs = [self.frequency_hz]
         amps = [self.amplitude_n]
         logged = [0]
 
         def add(time_s: float, freq: float, amp: float, log: int) -> None:
-            if time_s <= starts[-1]:  # only at t = 0: replaces the initial values
+            if time_s <= starts[-1]:  # only at start_s: replaces the initial values
                 freqs[-1], amps[-1] = freq, amp
                 return
             starts.append(time_s)
@@ -192,8 +242,14 @@ class DriveSchedule:
         start = np.asarray(starts, dtype=np.float64)
         omega = TWO_PI * np.asarray(freqs, dtype=np.float64)
         phase = np.zeros_like(start)
+        phase[0] = self.start_phase_rad
         for k in range(1, len(start)):
             phase[k] = math.fmod(phase[k - 1] + omega[k - 1] * (start[k] - start[k - 1]), TWO_PI)
         return DriveSegments(
-            start, omega, np.asarray(amps, dtype=np.float64), phase, np.asarray(logged, np.int8)
+            start,
+            omega,
+            np.asarray(amps, dtype=np.float64),
+            phase,
+            np.asarray(logged, np.int8),
+            np.asarray(freqs, dtype=np.float64),
         )

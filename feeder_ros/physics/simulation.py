@@ -76,6 +76,9 @@ __all__ = [
 
 #: group-pieces below which a parallel group pass runs on one thread
 SMALL_PARALLEL_WORK = 4096
+#: drive changes a live simulator keeps before it forgets those already in the past
+#: (:meth:`DriveSchedule.forget_before`; the drive from the present on is unchanged)
+FORGET_DRIVE_CHANGES_AFTER = 8
 
 F64 = npt.NDArray[np.float64]
 I8 = npt.NDArray[np.int8]
@@ -542,6 +545,10 @@ class FeederSimulator:
         at = self.time_s if at_time_s is None else _finite("at_time_s", at_time_s)
         if at < self.time_s:
             raise ParameterError(f"at_time_s={at!r} is before the simulator time {self.time_s!r}")
+        if len(self._drive.changes) > FORGET_DRIVE_CHANGES_AFTER:
+            # a live run gets a command per tick while ramping: without this the schedule (and
+            # the cost of rebuilding it on every command) would grow with the run's length
+            self._drive = self._drive.forget_before(self.time_s)
         self._drive = self._drive.with_change(DriveChange(at, frequency_hz, amplitude_n, ramp_s))
         if at == self.time_s:
             self._pending_events.append((at, int(EventKind.DRIVE_CHANGE), -1))

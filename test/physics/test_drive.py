@@ -70,3 +70,62 @@ def test_changes_out_of_order_are_refused() -> None:
         DriveSchedule(30.0, 1.0, (DriveChange(0.2, 30.0, 1.0), DriveChange(0.1, 30.0, 1.0)))
     with pytest.raises(DriveError, match="ramp_s=-1"):
         DriveChange(0.1, 30.0, 1.0, ramp_s=-1.0)
+
+
+def _busy_schedule() -> DriveSchedule:
+    """Ramps cut by the next change, changes sharing an instant, a change without a ramp."""
+    drive = DriveSchedule(30.0, 0.0)
+    rng = np.random.default_rng(7)
+    t = 0.0
+    for k in range(40):
+        t += float(rng.choice([0.004, 0.013, 0.0])) if k else 0.05
+        ramp = float(rng.choice([0.0, 0.01, 0.03]))
+        drive = drive.with_change(
+            DriveChange(t, 30.0 + float(rng.uniform(-3, 3)), float(rng.uniform(0, 40)), ramp)
+        )
+    return drive
+
+
+@pytest.mark.parametrize("at", [0.0, 0.05, 0.1234, 0.2, 0.2461, 0.3, 0.5, 9.0])
+def test_forget_before_keeps_the_drive_from_then_on_bit_for_bit(at: float) -> None:
+    drive = _busy_schedule()
+    last = drive.changes[-1]
+    assert last.time_s + last.ramp_s > 0.3  # (the schedule spans the instants tried)
+    short = drive.forget_before(at)
+    full, kept = drive.segments(), short.segments()
+    assert kept.start_s[0] <= at
+    assert all(change.time_s > kept.start_s[0] for change in short.changes)
+    # from the segment in force at `at` on, the very same numbers
+    k_full, k_kept = full.index_at(at), kept.index_at(at)
+    assert full.start_s.size - k_full == kept.start_s.size - k_kept
+    for name in ("start_s", "omega_rad_s", "amplitude_n", "phase_rad", "frequency_hz"):
+        assert getattr(kept, name)[k_kept:].tolist() == getattr(full, name)[k_full:].tolist()
+    assert kept.logged[k_kept + 1 :].tolist() == full.logged[k_full + 1 :].tolist()
+    t = np.linspace(at, 0.6, 2001)
+    assert short.force(t).tolist() == drive.force(t).tolist()
+    # and a new change on top of either gives the same drive again
+    change = DriveChange(max(at, 0.31), 28.0, 12.0, ramp_s=0.02)
+    a, b = drive.with_change(change).segments(), short.with_change(change).segments()
+    k_a, k_b = a.index_at(at), b.index_at(at)
+    assert a.phase_rad[k_a:].tolist() == b.phase_rad[k_b:].tolist()
+    assert a.start_s[k_a:].tolist() == b.start_s[k_b:].tolist()
+
+
+def test_forget_before_forgets_what_lies_before_and_nothing_else() -> None:
+    drive = _busy_schedule()
+    assert drive.forget_before(0.0) is drive  # nothing in the past yet
+    assert drive.forget_before(0.05) is drive  # the first change is the one in force
+    short = drive.forget_before(0.3)
+    assert len(short.changes) < len(drive.changes)
+    assert short.changes == drive.changes[-len(short.changes) :]
+    assert short.forget_before(0.3) is short  # idempotent
+    assert short.segments().start_s.size < drive.segments().start_s.size
+
+
+def test_a_schedule_start_and_its_phase_are_checked() -> None:
+    with pytest.raises(DriveError, match=r"start_phase_rad=7\.0"):
+        DriveSchedule(30.0, 1.0, start_s=1.0, start_phase_rad=7.0)
+    with pytest.raises(DriveError, match=r"a change at 0\.5 s is before start_s=1\.0"):
+        DriveSchedule(30.0, 1.0, (DriveChange(0.5, 30.0, 1.0),), start_s=1.0)
+    with pytest.raises(DriveError, match="start_s=nan"):
+        DriveSchedule(30.0, 1.0, start_s=math.nan)

@@ -115,6 +115,56 @@ def test_set_drive_schedules_a_phase_continuous_change(case_study: FeederParamet
         sim.set_drive(30.0, 1.0, at_time_s=0.1)
 
 
+def _live_run(
+    params: FeederParameters, parts: tuple[PartSpec, ...]
+) -> tuple[list[np.ndarray], int]:
+    """What a simulator node does under a drive interface that ramps: a command per 20 ms tick
+    (each ramped over the tick, some stamped ahead, some repeated at one instant), advancing in
+    ticks with samples on a 1 ms grid. Returns the outputs and the longest drive schedule."""
+    sim = FeederSimulator(params, parts=parts)
+    rng = np.random.default_rng(11)
+    out: list[np.ndarray] = []
+    longest = 0
+    for _ in range(400):
+        now = sim.time_s
+        ahead = float(rng.choice([0.0, 0.0, 0.007, 0.031]))
+        for _ in range(int(rng.choice([1, 1, 2]))):
+            sim.set_drive(
+                float(rng.uniform(20.0, 26.0)),
+                float(rng.uniform(10.0, 60.0)),
+                at_time_s=now + ahead,
+                ramp_s=float(rng.choice([0.02, 0.0, 0.05])),
+            )
+            longest = max(longest, len(sim.drive.changes))
+        run = sim.advance(now + 0.02, now + np.arange(1, 21) * 1e-3)
+        out += [run.carrier_x_m, run.carrier_v_mps, run.carrier_a_mps2, run.branch]
+        out += [run.part_x_m, run.part_v_mps, run.part_phase]
+        out += [run.event_t_s, run.event_kind, run.event_part]
+    return out, longest
+
+
+def test_a_live_drive_schedule_stays_short_and_the_run_is_unchanged(
+    monkeypatch: pytest.MonkeyPatch,
+) -> None:
+    import feeder_ros.physics.simulation as simulation
+
+    params = FeederParameters(damping_ns_per_m=200.0)
+    parts = (PartSpec(), PartSpec(position_m=0.01, static_friction=0.25, kinetic_friction=0.2))
+    forgetting, short = _live_run(params, parts)
+    monkeypatch.setattr(simulation, "FORGET_DRIVE_CHANGES_AFTER", 10**9)  # keep everything
+    remembering, long = _live_run(params, parts)
+    assert long > 400  # every command stays in the schedule
+    assert short <= 16  # (the threshold, 8, and the changes of one tick)
+    assert len(forgetting) == len(remembering)
+    for a, b in zip(forgetting, remembering, strict=True):
+        assert a.dtype == b.dtype
+        assert a.tobytes() == b.tobytes()  # bit for bit
+    events = np.concatenate(forgetting[8::10])
+    changes = np.count_nonzero(events == int(EventKind.DRIVE_CHANGE))
+    assert changes > 300
+    assert events.size - changes > 300  # (and the parts stick and slip)
+
+
 def test_simulate_many_agrees_with_single_runs() -> None:
     points = [
         FeederParameters(drive_amplitude_n=a, drive_frequency_hz=f, damping_ns_per_m=10.0)
