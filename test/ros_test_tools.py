@@ -8,6 +8,7 @@ import subprocess
 import sys
 import threading
 import time
+import weakref
 from collections.abc import Callable, Iterator, Sequence
 from contextlib import contextmanager
 from pathlib import Path
@@ -65,36 +66,58 @@ def wait_until(predicate: Callable[[], bool], timeout_s: float) -> bool:
 @contextmanager
 def probe_node(name: str = "feeder_test_probe") -> Iterator[Node]:
     """An rclpy node in its own context, spun by a background thread (subscriptions fill lists
-    while the test thread waits or makes service calls with :func:`call`)."""
+    while the test thread waits or makes service calls with :func:`call`). Should the spinning
+    thread die of an error, the probe's exit says so (instead of topics that just go quiet)."""
     context = Context()
     rclpy.init(context=context)
     node = rclpy.create_node(name, context=context)
     executor = SingleThreadedExecutor(context=context)
     executor.add_node(node)
-    thread = threading.Thread(target=executor.spin, daemon=True)
+    errors: list[BaseException] = []
+
+    def spin() -> None:
+        try:
+            executor.spin()
+        except BaseException as error:  # reported at the probe's exit
+            errors.append(error)
+
+    thread = threading.Thread(target=spin, daemon=True)
     thread.start()
     try:
         yield node
     finally:
         executor.shutdown()
         thread.join(timeout=5)
+        _clients.pop(node, None)
         node.destroy_node()
         rclpy.shutdown(context=context)
+        if errors:  # (shown with a failure the dead thread caused, e.g. a wait that timed out)
+            print(f"the probe's executor thread died: {errors[0]!r}")
+    if errors:
+        raise AssertionError(f"the probe's executor thread died: {errors[0]!r}") from errors[0]
+
+
+#: one client per probe, service type and name, kept for the probe's life: destroying a client
+#: while the probe's executor thread spins can raise InvalidHandle in that thread (rclpy checks
+#: ``client.handle`` of the node's live client list after each wait) and stop it
+_clients: weakref.WeakKeyDictionary[Node, dict[tuple[Any, str], Any]] = weakref.WeakKeyDictionary()
 
 
 def call(node: Node, service_type: Any, name: str, request: Any, timeout_s: float = 10.0) -> Any:
     """Call a service from the test thread (the probe's executor thread delivers the answer)."""
-    client = node.create_client(service_type, name)
-    try:
-        assert client.wait_for_service(timeout_sec=timeout_s), f"{name} not available"
-        future = client.call_async(request)
-        deadline = time.monotonic() + timeout_s
-        while not future.done() and time.monotonic() < deadline:
-            time.sleep(0.01)
-        assert future.done(), f"{name} did not answer within {timeout_s} s"
-        return future.result()
-    finally:
-        node.destroy_client(client)
+    clients = _clients.setdefault(node, {})
+    client = clients.get((service_type, name))
+    if client is None:
+        client = clients[(service_type, name)] = node.create_client(service_type, name)
+    assert client.wait_for_service(timeout_sec=timeout_s), f"{name} not available"
+    future = client.call_async(request)
+    deadline = time.monotonic() + timeout_s
+    while not future.done() and time.monotonic() < deadline:
+        time.sleep(0.01)
+    if not future.done():
+        client.remove_pending_request(future)
+        raise AssertionError(f"{name} did not answer within {timeout_s} s")
+    return future.result()
 
 
 class DrainedProcess(subprocess.Popen[str]):
