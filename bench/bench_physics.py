@@ -13,7 +13,10 @@ One run measures, on the same machine and in the same process:
   2 s undamped, the whole run damped; see MODEL-NOTES on chaos), and for the whole run statistics
   (stiffness switches per second, RMS displacement, the part's mean speed and slip fraction);
 * scale: 1000 parts on one carrier (one part type; all-distinct frictions) and a Fig. 9-style sweep
-  of 700 operating points x 40 s with ``simulate_many``.
+  of 700 operating points x 40 s with ``simulate_many``;
+* a live run as the simulator node does it under a ramping drive interface (a ramped command and
+  a 20 ms advance per tick): the cost of a tick at the start and at the end of the run, with the
+  drive schedule forgetting past changes (the engine) and keeping them all (the baseline).
 
 Usage: ``python bench/bench_physics.py [--quick] [--output FILE]``. Prints a markdown report; with
 ``--output`` also writes it there (the lead copies it into BENCHMARKS.md). ``--quick`` is a short
@@ -40,8 +43,10 @@ REPO = Path(__file__).resolve().parents[1]
 if str(REPO) not in sys.path:
     sys.path.insert(0, str(REPO))
 
+import feeder_ros.physics.simulation as simulation  # noqa: E402
 from feeder_ros.physics.parameters import FeederParameters  # noqa: E402
 from feeder_ros.physics.simulation import (  # noqa: E402
+    FeederSimulator,
     PartSpec,
     SimulationResult,
     simulate,
@@ -342,6 +347,49 @@ def sweep(duration_s: float, n_freq: int, n_amp: int) -> list[str]:
     ]
 
 
+def live_ticks(ticks: int, forget_after: int) -> tuple[float, float, int]:
+    """A live run of ``ticks`` 20 ms ticks, each with a command ramped over the tick (what the
+    drive interface sends while ramping or tracking); returns the mean wall time per tick over the
+    first and the last 10 % of the ticks and the drive changes kept at the end."""
+    kept = simulation.FORGET_DRIVE_CHANGES_AFTER
+    simulation.FORGET_DRIVE_CHANGES_AFTER = forget_after
+    try:
+        sim = FeederSimulator(FeederParameters(damping_ns_per_m=200.0), parts=(PartSpec(),))
+        grid = np.arange(1, 21) * 1e-3
+        walls = np.empty(ticks)
+        for k in range(ticks):
+            started = time.perf_counter()
+            now = sim.time_s
+            sim.set_drive(21.0 + 0.3 * math.sin(0.1 * k), 50.0, at_time_s=now, ramp_s=0.02)
+            sim.advance(now + 0.02, now + grid)
+            walls[k] = time.perf_counter() - started
+    finally:
+        simulation.FORGET_DRIVE_CHANGES_AFTER = kept
+    tenth = max(ticks // 10, 1)
+    return float(walls[:tenth].mean()), float(walls[-tenth:].mean()), len(sim.drive.changes)
+
+
+def live_drive(ticks: int) -> list[str]:
+    lines = [
+        f"#### Live run under a ramping drive ({ticks} ticks of 20 ms, a ramped command each)",
+        "",
+        "| drive schedule | first 10 % [ms/tick] | last 10 % [ms/tick] | last / first | "
+        "changes kept at the end |",
+        "| --- | ---: | ---: | ---: | ---: |",
+    ]
+    live_ticks(20, simulation.FORGET_DRIVE_CHANGES_AFTER)  # first calls (caches) not timed
+    for label, forget_after in (
+        ("forgets past changes (engine)", simulation.FORGET_DRIVE_CHANGES_AFTER),
+        ("keeps every change (baseline)", 1 << 62),
+    ):
+        first, last, kept = live_ticks(ticks, forget_after)
+        lines.append(
+            f"| {label} | {first * 1e3:.3f} | {last * 1e3:.3f} | {last / first:.3g} | {kept} |"
+        )
+    lines.append("")
+    return lines
+
+
 def main(argv: list[str] | None = None) -> int:
     parser = argparse.ArgumentParser(description=__doc__.splitlines()[0])
     parser.add_argument(
@@ -354,6 +402,7 @@ def main(argv: list[str] | None = None) -> int:
         cases = [Case(0.4, 0.0, 0.3), Case(40.0, DAMPING, 0.2)]
         parts_run, parts_count = 0.2, 20
         sweep_args = (0.2, 4, 2)
+        ticks = 40
     else:
         cases = [
             Case(0.4, 0.0, 100.0),
@@ -363,6 +412,7 @@ def main(argv: list[str] | None = None) -> int:
         ]
         parts_run, parts_count = 10.0, 1000
         sweep_args = (40.0, 35, 20)
+        ticks = 1500
 
     # compile the numba kernels once, outside the timings
     started = time.perf_counter()
@@ -395,6 +445,7 @@ def main(argv: list[str] | None = None) -> int:
         print(f"done: {case.name}", file=sys.stderr, flush=True)
     lines += many_parts(parts_run, parts_count)
     lines += sweep(*sweep_args)
+    lines += live_drive(ticks)
     report = "\n".join(lines)
     print(report)
     if args.output is not None:

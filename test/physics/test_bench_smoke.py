@@ -36,6 +36,8 @@ def test_benchmark_quick_run_writes_its_report(tmp_path: Path) -> None:
         "| one part type |",
         "| all-distinct frictions |",
         "Fig. 9-style sweep",
+        "| forgets past changes (engine) |",
+        "| keeps every change (baseline) |",
     ):
         assert row in text
     # the engine agrees with the DOP853 reference to round-off in every case table
