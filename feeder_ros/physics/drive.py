@@ -101,7 +101,8 @@ class DriveSegments:
 
 @dataclass(frozen=True)
 class DriveSchedule:
-    """Initial frequency/amplitude at ``t = 0`` and a time-ordered tuple of :class:`DriveChange`.
+    """Initial frequency/amplitude (at ``start_s``, 0 by default) and a time-ordered tuple of
+    :class:`DriveChange`.
 
     ``start_s``/``start_phase_rad``: where the schedule starts and the phase there (0, 0 for a
     new schedule; later for one that forgot its older changes, :meth:`forget_before`). Before
