@@ -499,6 +499,13 @@ def _release(rows, r, sg, c0, c1, c2, T, cc, ss, sn, cs, bc, bs, der):
             q -= B * pw * s0 / (fact * (n + 1))
             if q > 2.0 * tol:
                 return REL_SKIP, s0
+            if s0 == T:
+                # the piece ends before the function clears round-off: over all of it, it moves
+                # inward (its Taylor lower bound has no root in (0, T]) and stays within
+                # round-off of zero, so it has no event here. (An event now would be a false
+                # one: e.g. the carrier at rest on the switching surface and a drive change
+                # 0.5 ns later flipped its branch back and forth at one instant.)
+                return REL_SKIP, T
         # a derivative this close to zero is a tangency (e.g. the carrier leaving the sliding mode
         # with x'' = 0): ignoring its sign only ignores a dip far below round-off of x
         tol_n = DERIVATIVE_ZERO * (abs(sg) * _row_bound(rows, r + n, bc, bs) + abs(pd))
@@ -1548,6 +1555,7 @@ def _march_group(
             hit = -1
             if ph == STICK and nf == 2 and _row_bound(rows, 2, bc, bs) < L:
                 nf = 0  # |a| stays below the stick limit for the rest of the piece
+            whole = False
             for i in range(nf):
                 if _clearly_free(
                     rows, f_row[i], f_sgn[i], f_c0[i], f_c1[i], cc, ss, sn, cs, bc, bs
@@ -1587,10 +1595,14 @@ def _march_group(
                 if code == REL_NOW:
                     hit = i
                     break
+                if code == REL_SKIP and f_skip[i] >= rem:
+                    whole = True
             s = 0.0
             certify = hit < 0 and nf > 0  # search with certified steps from s
             fresh = False  # the certified search starts with fresh basis values
-            if certify and nk > 1 and rem > 0.0 and (ph != STICK or nf == 2):
+            # (a function released for the whole rest of the piece, within round-off of zero
+            # all along, goes to the certified search, which skips it as the global loop does)
+            if certify and nk > 1 and rem > 0.0 and (ph != STICK or nf == 2) and not whole:
                 # the node table first: cells without a root are passed on their end values, a
                 # cell with one is solved by a bracketed Halley iteration; undecided cells (and
                 # a part that may reach the track end) go to the certified search

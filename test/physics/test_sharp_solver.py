@@ -2,6 +2,7 @@
 
 from __future__ import annotations
 
+import dataclasses
 import math
 from collections.abc import Callable
 
@@ -71,6 +72,45 @@ def test_drive_changes_and_ramps_match_dop853(switch: str) -> None:
     ref = reference_simulate(params, 0.07, 1000.0, (PartSpec(),), drive)
     assert_same_run(run, ref)
     assert np.count_nonzero(run.event_kind == EventKind.DRIVE_CHANGE) == 2
+
+
+@pytest.mark.parametrize("phase_rad", [0.0, 2.99, 4.0])
+@pytest.mark.parametrize("gap_s", [5e-10, 1e-12])
+def test_a_second_drive_change_within_a_nanosecond_from_rest_matches_dop853(
+    gap_s: float, phase_rad: float
+) -> None:
+    """The carrier at rest on its switching surface as the drive comes on, and a second change
+    a nanosecond later (a live simulator got two commands whose stamps differed by the
+    nanosecond rounding of its clock). The first piece ends before the carrier has left the
+    surface by more than round-off; the solver used to flip its branch back and forth at that
+    instant until it gave up, which stopped the simulator node."""
+    params = FeederParameters(damping_ns_per_m=200.0)
+    start = DriveSchedule(21.5, 0.079, start_phase_rad=phase_rad)  # force >0, 0, <0 at t = 0
+    change = DriveChange(gap_s, 21.505, 0.198, ramp_s=0.02)
+    drive = start.with_change(change)
+    run = simulate(params, 0.025, 1000.0, (PartSpec(),), drive)
+    ref = reference_simulate(params, 0.025, 1000.0, (PartSpec(),), drive)
+    if phase_rad > math.pi:
+        # the force pulls into x < 0 at t = 0: at rest on the surface, the solver starts on
+        # the branch the carrier moves into; the reference starts on x >= 0's and switches at
+        # t = 0 (its first sample and first event)
+        assert (run.branch[0], ref.branch[0]) == (-1, 1)
+        assert (ref.event_t_s[0], ref.event_kind[0]) == (0.0, EventKind.BRANCH_SWITCH)
+        ref = dataclasses.replace(
+            ref,
+            branch=np.r_[np.int8(-1), ref.branch[1:]],
+            event_t_s=ref.event_t_s[1:],
+            event_kind=ref.event_kind[1:],
+            event_part=ref.event_part[1:],
+        )
+    assert_same_run(run, ref)
+    assert np.max(np.abs(run.carrier_x_m)) > 1e-8  # (the carrier did get going)
+    # live, as the simulator node does it: the second command arrives, then one advance
+    sim = FeederSimulator(params, (PartSpec(),), start)
+    sim.set_drive(change.frequency_hz, change.amplitude_n, change.time_s, change.ramp_s)
+    live = sim.advance(0.025, run.t_s)
+    assert_close(live.carrier_x_m, run.carrier_x_m, float(np.max(np.abs(ref.carrier_x_m))))
+    assert np.array_equal(live.event_kind, run.event_kind)
 
 
 def test_velocity_switching_holds_the_carrier_in_the_sliding_mode() -> None:
