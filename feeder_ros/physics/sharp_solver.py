@@ -558,7 +558,7 @@ def _cell(fa, fb, da, db, ca, cb, B, B3, h, tol, dtol):
             return CELL_UNSURE
         if fb > tol and (convex or concave):
             return CELL_NONE  # rising from a: convex keeps rising, concave stays above the chord
-        if fb < 0.0 and concave:
+        if fb < -tol and concave:
             return CELL_ROOT  # up from a, down through the one root of a concave function
         return CELL_UNSURE
     falling = da < 0.0 and db < 0.0 and da + db < -B * h
@@ -644,6 +644,76 @@ def _group_lead(g, g_head, m_next, m_o):
     return lead
 
 
+@njit(cache=True, inline="always")
+def _shifted_samples(
+    samples, ns, nb, jb, t0, tb, h_nom, rot, cb, sb, snb, csb, sigma, lam, w, rows, held, mode,
+    out_cx, out_cv, out_ca, out_cb,
+):  # fmt: skip
+    """The carrier at samples ``ns .. ns+nb-1``, shifted by ``(jb+1+i)*h_nom`` from the basis
+    ``(cb, sb, snb, csb)`` at ``tb`` (the shifts' table ``rot`` is filled up to ``jb+nb``)."""
+    r00, r01, r02, r03, r04 = rows[0, 0], rows[0, 1], rows[0, 2], rows[0, 3], rows[0, 4]
+    r10, r11, r12, r13, r14 = rows[1, 0], rows[1, 1], rows[1, 2], rows[1, 3], rows[1, 4]
+    r20, r21, r22, r23, r24 = rows[2, 0], rows[2, 1], rows[2, 2], rows[2, 3], rows[2, 4]
+    b = int(mode)
+    for i in range(nb):
+        j = jb + 1 + i
+        dt = (samples[ns + i] - t0) - (tb + j * h_nom)
+        ch = rot[0, j]
+        sh = rot[1, j]
+        sw = rot[2, j]
+        cw = rot[3, j]
+        cr = ch * cb + lam * sh * sb
+        sr = sh * cb + ch * sb
+        snr = snb * cw + csb * sw
+        csr = csb * cw - snb * sw
+        cc = cr + dt * (sigma * cr + lam * sr)
+        ss = sr + dt * (sigma * sr + cr)
+        sn = snr + dt * (w * csr)
+        cs = csr - dt * (w * snr)
+        out_cx[ns + i] = r00 * cc + r01 * ss + r02 * sn + r03 * cs + r04
+        out_cb[ns + i] = b
+        if held:
+            out_cv[ns + i] = 0.0
+            out_ca[ns + i] = 0.0
+        else:
+            out_cv[ns + i] = r10 * cc + r11 * ss + r12 * sn + r13 * cs + r14
+            out_ca[ns + i] = r20 * cc + r21 * ss + r22 * sn + r23 * cs + r24
+
+
+@njit(cache=True, inline="always")
+def _part_samples(
+    samples, ns, nb, t0, ts, xs, out_cx, out_cv, n_groups, g_head, g_phase, g_u, g_y, g_D,
+    m_group, m_o, out_px, out_pv, out_pp,
+):  # fmt: skip
+    """The parts at samples ``ns .. ns+nb-1`` (carrier already written there): a sticking group
+    moves with the carrier, a slipping one with its constant acceleration ``-+D`` since ``ts``."""
+    for j in range(m_group.shape[0]):
+        g = m_group[j]
+        if g < 0:
+            for i in range(ns, ns + nb):
+                out_px[i, j] = np.nan
+                out_pv[i, j] = np.nan
+                out_pp[i, j] = EXITED
+            continue
+        ph = g_phase[g]
+        y = g_y[g]
+        o = m_o[j]
+        if ph == STICK:
+            for i in range(ns, ns + nb):
+                out_px[i, j] = o + y + out_cx[i]
+                out_pv[i, j] = out_cv[i]
+                out_pp[i, j] = ph
+        else:
+            ap = g_D[g] if ph == SLIP_BACKWARD else -g_D[g]
+            u = g_u[g]
+            for i in range(ns, ns + nb):
+                sk = (samples[i] - t0) - ts
+                xk = out_cx[i]
+                out_px[i, j] = o + (y + sk * (u + 0.5 * ap * sk) - (xk - xs)) + xk
+                out_pv[i, j] = u + ap * sk
+                out_pp[i, j] = ph
+
+
 @njit(cache=True)
 def advance(
     model,
@@ -725,15 +795,13 @@ def advance(
     der = np.zeros(5)
     bnds = np.zeros(NROWS)
     hbnds = np.zeros(NROWS)
-    gu_k = np.zeros(n_groups)
-    gy_k = np.zeros(n_groups)
     zero_count = 0
     # output samples: the basis is shifted by the nominal spacing h_nom between samples
     h_nom = 0.0
     if n_samples >= 2:
         h_nom = (samples[n_samples - 1] - samples[0]) / (n_samples - 1)
     rot_key = np.full((2, 3), np.nan)
-    rot = np.zeros((2, N_ROT, 4))
+    rot = np.zeros((2, 4, N_ROT))  # per branch: C, S, sin, cos of the shifts j*h_nom
     rot_n = np.ones(2, np.int64)
 
     record = pieces.shape[0] > 0
@@ -774,7 +842,7 @@ def advance(
             t0 = state[S_T]
             if t0 >= t_end:
                 break
-        if (log_events and counters[1] + n_members + 2 > cap) or (
+        if (log_events and counters[1] + n_members + 3 > cap) or (
             record and counters[4] + 1 > pieces.shape[0]
         ):
             counters[2] = STATUS_BUFFER_FULL
@@ -787,7 +855,11 @@ def advance(
             seg = int(state[S_SEG])
             nseg = d_start.shape[0]
             while seg + 1 < nseg and d_start[seg + 1] <= t0:
+                # the last piece ended on an event within round-off of a drive change (its end
+                # time rounded onto the change): the change is logged here
                 seg += 1
+                if log_events and d_logged[seg] != 0:
+                    _log(ev_t, ev_kind, ev_part, counters, d_start[seg], EV_DRIVE, -1)
             state[S_SEG] = seg
             w = d_omega[seg]
             A = d_amp[seg]
@@ -1076,69 +1148,56 @@ def advance(
             tb = 0.0
             jb = N_ROT
         while ns < n_samples and (samples[ns] < t_stop or (last and samples[ns] <= t_end)):
-            tk = samples[ns] - t0
-            direct = True
+            # a block of samples shifted from the last directly evaluated one (exact shift
+            # identities C(t+h) = C(h)C + lam*S(h)S, S(t+h) = S(h)C + C(h)S, the drive's angle
+            # addition, and a first-order Taylor term for the round-off difference dt between a
+            # sample and tb + j*h_nom), or else one sample evaluated directly
+            nb = 0
             if can_rot and jb + 1 < N_ROT:
-                # exact shift identities C(t+h) = C(h)C + lam*S(h)S, S(t+h) = S(h)C + C(h)S
-                # from the last directly evaluated sample give the basis at tb + (jb+1)*h_nom;
-                # a first-order Taylor term absorbs the round-off difference dt to the sample
-                jb += 1
-                dt = tk - (tb + jb * h_nom)
-                if abs(dt) <= eps_rec:
-                    if jb >= rot_n[slot]:
-                        rc, rs, rsw, rcw = _basis(jb * h_nom, sigma, lam, root, r1, w, 0.0)
-                        rot[slot, jb, 0] = rc
-                        rot[slot, jb, 1] = rs
-                        rot[slot, jb, 2] = rsw
-                        rot[slot, jb, 3] = rcw
-                        rot_n[slot] = jb + 1
-                    ch = rot[slot, jb, 0]
-                    sh = rot[slot, jb, 1]
-                    sw = rot[slot, jb, 2]
-                    cw = rot[slot, jb, 3]
-                    cr = ch * cb + lam * sh * sb
-                    sr = sh * cb + ch * sb
-                    snr = snb * cw + csb * sw
-                    csr = csb * cw - snb * sw
-                    cc = cr + dt * (sigma * cr + lam * sr)
-                    ss = sr + dt * (sigma * sr + cr)
-                    sn = snr + dt * (w * csr)
-                    cs = csr - dt * (w * snr)
-                    direct = False
-            if direct:
-                cb, sb, snb, csb = _basis(tk, sigma, lam, root, r1, w, phi)
-                tb = tk
-                jb = 0
-                cc, ss, sn, cs = cb, sb, snb, csb
-            xk = _row(rows, 0, cc, ss, sn, cs)
-            vk = 0.0 if held else _row(rows, 1, cc, ss, sn, cs)
-            ak = 0.0 if held else _row(rows, 2, cc, ss, sn, cs)
+                cap_b = N_ROT - 1 - jb
+                while nb < cap_b and ns + nb < n_samples:
+                    tq = samples[ns + nb]
+                    if not (tq < t_stop or (last and tq <= t_end)):
+                        break
+                    if not abs((tq - t0) - (tb + (jb + 1 + nb) * h_nom)) <= eps_rec:
+                        break
+                    nb += 1
+                if jb + nb >= rot_n[slot]:
+                    # the shifts by j*h_nom of this basis, filled on demand
+                    for jr in range(rot_n[slot], jb + nb + 1):
+                        rc, rs, rsw, rcw = _basis(jr * h_nom, sigma, lam, root, r1, w, 0.0)
+                        rot[slot, 0, jr] = rc
+                        rot[slot, 1, jr] = rs
+                        rot[slot, 2, jr] = rsw
+                        rot[slot, 3, jr] = rcw
+                    rot_n[slot] = jb + nb + 1
+            if nb > 0:
+                _shifted_samples(
+                    samples, ns, nb, jb, t0, tb, h_nom, rot[slot], cb, sb, snb, csb, sigma, lam,
+                    w, rows, held, mode, out_cx, out_cv, out_ca, out_cb,
+                )  # fmt: skip
+                if n_members > 0:
+                    _part_samples(
+                        samples, ns, nb, t0, ts, xs, out_cx, out_cv, n_groups, g_head, g_phase,
+                        g_u, g_y, g_D, m_group, m_o, out_px, out_pv, out_pp,
+                    )  # fmt: skip
+                jb += nb
+                ns += nb
+                continue
+            tk = samples[ns] - t0
+            cb, sb, snb, csb = _basis(tk, sigma, lam, root, r1, w, phi)
+            tb = tk
+            jb = 0
+            xk = _row(rows, 0, cb, sb, snb, csb)
             out_cx[ns] = xk
-            out_cv[ns] = vk
-            out_ca[ns] = ak
+            out_cv[ns] = 0.0 if held else _row(rows, 1, cb, sb, snb, csb)
+            out_ca[ns] = 0.0 if held else _row(rows, 2, cb, sb, snb, csb)
             out_cb[ns] = int(mode)
             if n_members > 0:
-                for g in range(n_groups):
-                    if g_head[g] < 0:
-                        continue
-                    if g_phase[g] == STICK:
-                        gu_k[g] = vk
-                        gy_k[g] = g_y[g]
-                    else:
-                        ap = g_D[g] if g_phase[g] == SLIP_BACKWARD else -g_D[g]
-                        sk = tk - ts
-                        gu_k[g] = g_u[g] + ap * sk
-                        gy_k[g] = g_y[g] + sk * (g_u[g] + 0.5 * ap * sk) - (xk - xs)
-                for j in range(n_members):
-                    g = m_group[j]
-                    if g < 0:
-                        out_px[ns, j] = np.nan
-                        out_pv[ns, j] = np.nan
-                        out_pp[ns, j] = EXITED
-                    else:
-                        out_px[ns, j] = m_o[j] + gy_k[g] + xk
-                        out_pv[ns, j] = gu_k[g]
-                        out_pp[ns, j] = g_phase[g]
+                _part_samples(
+                    samples, ns, 1, t0, ts, xs, out_cx, out_cv, n_groups, g_head, g_phase, g_u,
+                    g_y, g_D, m_group, m_o, out_px, out_pv, out_pp,
+                )  # fmt: skip
             ns += 1
         counters[0] = ns
 
@@ -1555,6 +1614,13 @@ def _march_group(
             hit = -1
             if ph == STICK and nf == 2 and _row_bound(rows, 2, bc, bs) < L:
                 nf = 0  # |a| stays below the stick limit for the rest of the piece
+            if rem <= 4.0 * EPS * (abs(t0) + T):
+                # an event within round-off of the end of the piece: the next piece (a drive
+                # change or a branch switch follows) releases the new phase's functions with its
+                # own motion, as the global loop does (there a function cannot clear round-off
+                # in so short a rest). Released here, a relative velocity still on its zero
+                # reversed the part again and again at one instant.
+                nf = 0
             whole = False
             for i in range(nf):
                 if _clearly_free(
@@ -1661,10 +1727,12 @@ def _march_group(
                     if split:
                         # halve the cell with an exact evaluation at its middle
                         found = -1
-                        if sp == SPLIT_DEPTH:
+                        sm = 0.5 * (sa + sb)
+                        if sp == SPLIT_DEPTH or not sa < sm < sb:
+                            # (a cell one ulp wide cannot be halved: halving it again and again
+                            # at the same depth never ends)
                             unsure = True
                             break
-                        sm = 0.5 * (sa + sb)
                         cc, ss, sn, cs, bc, bs = _basis_all(ts + sm, sigma, lam, root, r1, w, phi)
                         sp_s[sp] = sm
                         sp_v[sp, 0] = _row(rows, fr, cc, ss, sn, cs)

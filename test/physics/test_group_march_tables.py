@@ -6,8 +6,9 @@ import numpy as np
 import pytest
 
 from feeder_ros.physics import sharp_solver as k
+from feeder_ros.physics.drive import DriveChange, DriveSchedule
 from feeder_ros.physics.parameters import FeederParameters
-from feeder_ros.physics.simulation import FeederSimulator, PartSpec
+from feeder_ros.physics.simulation import EventKind, FeederSimulator, PartSpec, SimulationResult
 
 
 def _distinct_parts(count: int, seed: int) -> list[PartSpec]:
@@ -230,3 +231,75 @@ def test_table_march_equals_the_global_event_loop(
     np.testing.assert_array_equal(one.event_part[a], two.event_part[b])
     np.testing.assert_allclose(one.event_t_s[a], two.event_t_s[b], rtol=0, atol=1e-12)
     assert np.all(np.diff(two.event_t_s) >= 0.0)
+
+
+def _by_part(result: SimulationResult) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
+    """Events ordered by part, kind, time (simultaneous events may come in either order)."""
+    o = np.lexsort((result.event_t_s, result.event_kind, result.event_part))
+    return result.event_t_s[o], result.event_kind[o], result.event_part[o]
+
+
+def _same_events(one: SimulationResult, two: SimulationResult) -> bool:
+    (ta, ka, pa), (tb, kb, pb) = _by_part(one), _by_part(two)
+    return (
+        ta.size == tb.size
+        and np.array_equal(ka, kb)
+        and np.array_equal(pa, pb)
+        and bool(np.all(np.abs(ta - tb) <= 1e-12))
+    )
+
+
+def _events_near(result: SimulationResult, t_s: float) -> list[tuple[int, int]]:
+    near = np.abs(result.event_t_s - t_s) <= 1e-15
+    kinds, parts = result.event_kind[near].tolist(), result.event_part[near].tolist()
+    return sorted(zip(kinds, parts, strict=True))
+
+
+@pytest.mark.parametrize(("damping", "amplitude"), [(30.0, 30.0), (0.0, 40.0)])
+def test_a_drive_change_exactly_at_a_part_event(damping: float, amplitude: float) -> None:
+    """The drive changes at the very instant of a part event, for every part event of a run.
+
+    This used to stop the table march ("an event repeats at one instant": the event found an ulp
+    before the end of a carrier piece left a sub-piece shorter than round-off, or a cell of the
+    node table claimed a root on the table's round-off), hang it (a cell one ulp wide halved
+    forever), and drop the DRIVE_CHANGE from the global loop's log when the carrier's event
+    rounded onto the change. Now both paths finish, each logs the change once, at its time, and
+    they agree unless the two paths resolve the tie at the change itself differently (an event
+    within round-off of the change found on either side of it)."""
+    params = FeederParameters(damping_ns_per_m=damping, drive_amplitude_n=amplitude)
+    parts = [
+        PartSpec(
+            position_m=0.01 * i, static_friction=0.12 + 0.03 * i, kinetic_friction=0.06 + 0.02 * i
+        )
+        for i in range(6)
+    ]
+    times = np.arange(301) / 1000.0
+
+    def run(parallel_min_groups: int, drive: DriveSchedule | None) -> SimulationResult:
+        sim = FeederSimulator(params, parts, drive)
+        sim.parallel_min_groups = parallel_min_groups
+        return sim.advance(0.3, times)
+
+    base = run(10**9, None)
+    part_events = base.event_t_s[base.event_part >= 0]
+    assert part_events.size > 80
+    f = params.drive_frequency_hz
+    agree = 0
+    for t_e in part_events.tolist():
+        change = DriveChange(t_e, 1.01 * f, 1.03 * amplitude)
+        drive = DriveSchedule(f, amplitude, (change,))
+        one, two = run(10**9, drive), run(1, drive)
+        for result in (one, two):
+            changes = result.event_t_s[result.event_kind == EventKind.DRIVE_CHANGE]
+            assert changes.tolist() == [t_e]
+            assert np.all(np.diff(result.event_t_s) >= 0.0)
+        if _same_events(one, two):
+            agree += 1
+            np.testing.assert_array_equal(one.part_phase, two.part_phase)
+            np.testing.assert_allclose(two.part_x_m, one.part_x_m, rtol=0, atol=1e-13)
+            np.testing.assert_allclose(two.part_v_mps, one.part_v_mps, rtol=0, atol=1e-11)
+        else:
+            # a tie at the change: the paths differ in the events within round-off of it
+            k1, k2 = (_events_near(result, t_e) for result in (one, two))
+            assert k1 != k2, f"the paths differ after a drive change at {t_e!r} s, not at it"
+    assert agree >= 0.9 * part_events.size
