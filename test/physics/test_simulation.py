@@ -15,11 +15,43 @@ from feeder_ros.physics.simulation import (
     PartSpec,
     Phase,
     SimulationError,
+    _output_arrays,
     simulate,
     simulate_carrier,
     simulate_many,
     simulate_parts,
 )
+
+
+@pytest.mark.parametrize(("n", "parts", "march"), [(5, 3, False), (7, 3, True), (4, 0, False)])
+def test_output_arrays_are_separate_aligned_views_of_one_block(
+    n: int, parts: int, march: bool
+) -> None:
+    arrays = _output_arrays(n, parts, march)
+    shapes = [(n,)] * 4 + [(n, parts)] * 3
+    dtypes = [np.float64] * 3 + [np.int8] + [np.float64] * 2 + [np.int8]
+    assert [a.shape for a in arrays] == shapes
+    assert [a.dtype for a in arrays] == dtypes
+    base = arrays[0].base
+    while base.base is not None:
+        base = base.base
+    for a in arrays:
+        assert a.size == 0 or a.ctypes.data % 64 == 0
+        assert a.flags.writeable
+        assert a.flags.f_contiguous if march and a.ndim == 2 else a.flags.c_contiguous
+        owner = a.base
+        while owner.base is not None:
+            owner = owner.base
+        assert owner is base
+    if march:
+        assert np.isnan(arrays[4]).all()
+        assert np.isnan(arrays[5]).all()
+        assert (arrays[6] == Phase.EXITED).all()
+    # no two overlap: each array filled with its own number keeps it
+    for i, a in enumerate(arrays):
+        a[...] = i + 1
+    for i, a in enumerate(arrays):
+        assert (a == i + 1).all()
 
 
 def test_result_shapes_and_sample_times(case_study: FeederParameters) -> None:
