@@ -682,8 +682,8 @@ def _shifted_samples(
 
 @njit(cache=True, inline="always")
 def _part_samples(
-    samples, ns, nb, t0, ts, xs, out_cx, out_cv, n_groups, g_head, g_phase, g_u, g_y, g_D,
-    m_group, m_o, out_px, out_pv, out_pp,
+    samples, ns, nb, t0, ts, xs, out_cx, out_cv, g_phase, g_u, g_y, g_D, m_group, m_o, out_px,
+    out_pv, out_pp,
 ):  # fmt: skip
     """The parts at samples ``ns .. ns+nb-1`` (carrier already written there): a sticking group
     moves with the carrier, a slipping one with its constant acceleration ``-+D`` since ``ts``."""
@@ -1178,8 +1178,8 @@ def advance(
                 )  # fmt: skip
                 if n_members > 0:
                     _part_samples(
-                        samples, ns, nb, t0, ts, xs, out_cx, out_cv, n_groups, g_head, g_phase,
-                        g_u, g_y, g_D, m_group, m_o, out_px, out_pv, out_pp,
+                        samples, ns, nb, t0, ts, xs, out_cx, out_cv, g_phase, g_u, g_y, g_D,
+                        m_group, m_o, out_px, out_pv, out_pp,
                     )  # fmt: skip
                 jb += nb
                 ns += nb
@@ -1195,8 +1195,8 @@ def advance(
             out_cb[ns] = int(mode)
             if n_members > 0:
                 _part_samples(
-                    samples, ns, 1, t0, ts, xs, out_cx, out_cv, n_groups, g_head, g_phase, g_u,
-                    g_y, g_D, m_group, m_o, out_px, out_pv, out_pp,
+                    samples, ns, 1, t0, ts, xs, out_cx, out_cv, g_phase, g_u, g_y, g_D, m_group,
+                    m_o, out_px, out_pv, out_pp,
                 )  # fmt: skip
             ns += 1
         counters[0] = ns
