@@ -187,11 +187,15 @@ def test_bad_samples_are_reported_not_averaged_in() -> None:
         for k in range(int(2.0 * rate)):
             t = t0 + k / rate
             value = 3.0 * math.sin(2 * math.pi * 25.0 * t)
-            if k in (700, 701, 702):
+            if k in (701, 702, 703):
                 value = math.nan
             send(t, value)
             if k % 10 == 0:
-                time.sleep(0.01)  # paced (~1 kHz): the reader's history holds 500 samples
+                # paced (~1 kHz): the reader's history holds 500 samples. Never between the
+                # three NaNs: the node processes what arrived by each publish tick as one batch
+                # and reports the drops of its latest batch, so a pause between them let a tick
+                # split them into "1" and "2" dropped
+                time.sleep(0.01)
 
         def reported(code: int) -> bool:
             return any(e.status == code for e in estimates)
@@ -201,8 +205,8 @@ def test_bad_samples_are_reported_not_averaged_in() -> None:
         ]
         bad = next(e for e in estimates if e.status == VehicleEstimate.STATUS_INVALID_SAMPLES)
         assert bad.status_message.startswith("3 non-finite samples dropped;"), bad.status_message
-        # the only gap is the one the three dropped samples left (from k = 699 to 703)
-        assert "; gap of 0.008 s at t=1001.398000;" in bad.status_message, bad.status_message
+        # the only gap is the one the three dropped samples left (from k = 700 to 704)
+        assert "; gap of 0.008 s at t=1001.400000;" in bad.status_message, bad.status_message
         for estimate in estimates:
             assert not (math.isnan(estimate.mean_speed_mps) and estimate.mean_speed_confidence > 0)
 
