@@ -2157,11 +2157,13 @@ SORT_CHUNKS = 2  # input chunks bucketed in parallel by stable_time_order
 SORT_SERIAL_BELOW = 4096  # fewer events are sorted by a plain stable argsort
 
 
-@njit(cache=True, parallel=True)
+@njit(cache=True)
 def stable_time_order(t):
-    """``np.argsort(t, kind="stable")`` for event times (finite), in linear expected time: the
-    times are spread over buckets (chunks of the input in parallel, each chunk's elements after
-    the previous chunk's in a bucket), then the buckets are sorted stably, in parallel."""
+    """``np.argsort(t, kind="stable")`` for event times (finite), in linear expected time.
+
+    Serial itself: a few events (a live simulator's tick) never start a parallel region, whose
+    worker threads would then spin on the other cores for a while (a whole second core at a
+    1 kHz tick). Many unordered events go to :func:`_bucket_order`."""
     n = t.shape[0]
     if n == 0:
         return np.zeros(0, np.int64)
@@ -2178,7 +2180,16 @@ def stable_time_order(t):
     if ordered:
         return np.arange(n)
     if n < SORT_SERIAL_BELOW:
-        return np.argsort(t, kind="mergesort")  # no parallel region for a few events
+        return np.argsort(t, kind="mergesort")
+    return _bucket_order(t, lo, hi)
+
+
+@njit(cache=True, parallel=True)
+def _bucket_order(t, lo, hi):
+    """The stable order of many finite times in ``[lo, hi]`` (``lo < hi``): the times are spread
+    over buckets (chunks of the input in parallel, each chunk's elements after the previous
+    chunk's in a bucket), then the buckets are sorted stably, in parallel."""
+    n = t.shape[0]
     nb = n // 2 + 1  # measured best: event times cluster at phases of the carrier cycle
     scale = nb / (hi - lo)
     C = SORT_CHUNKS

@@ -34,6 +34,7 @@ def test_node_tables_hold_the_carrier_and_bound_it(monkeypatch: pytest.MonkeyPat
     params = FeederParameters(drive_amplitude_n=40.0, damping_ns_per_m=10.0)
     sim = FeederSimulator(params, _distinct_parts(6, 1))
     sim.parallel_min_groups = 1
+    sim.march_min_work_s = 0.0
     sim.advance(1.0)
     (pieces, (start, h, tab, bnd)) = captured[0]
     n = pieces.shape[0]
@@ -183,6 +184,14 @@ def test_stable_time_order_falls_back_on_non_finite_times() -> None:
     assert np.array_equal(k.stable_time_order(times), np.argsort(times, kind="stable"))
 
 
+def test_stable_time_order_starts_no_parallel_region_for_few_events() -> None:
+    # a parallel region leaves the thread pool's workers spinning on the other cores for a while
+    # (a whole second core for a live simulator ticking at 1 kHz): only the bucket sort of many
+    # unordered events is parallel
+    assert not k.stable_time_order.targetoptions.get("parallel")
+    assert k._bucket_order.targetoptions.get("parallel")
+
+
 def _shared_friction_parts() -> list[PartSpec]:
     """Eight parts of three frictions: groups of several members."""
     rng = np.random.default_rng(11)
@@ -215,6 +224,7 @@ def test_table_march_equals_the_global_event_loop(
     one = serial.advance(2.0, times)
     table = FeederSimulator(params, specs)
     table.parallel_min_groups = 1
+    table.march_min_work_s = 0.0
     table.pieces_per_pass = pieces_per_pass
     two = table.advance(2.0, times)
     assert one.event_t_s.size == two.event_t_s.size > 24
@@ -279,6 +289,7 @@ def test_a_drive_change_exactly_at_an_event(damping: float, amplitude: float) ->
     def run(parallel_min_groups: int, drive: DriveSchedule | None) -> SimulationResult:
         sim = FeederSimulator(params, parts, drive)
         sim.parallel_min_groups = parallel_min_groups
+        sim.march_min_work_s = 0.0
         return sim.advance(0.3, times)
 
     base = run(10**9, None)

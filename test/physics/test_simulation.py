@@ -317,12 +317,24 @@ def test_switching_variable_can_change_mid_run(case_study: FeederParameters) -> 
     assert not np.any((run.branch == 1) & (v < 0.0) | (run.branch == -1) & (v > 0.0))
 
 
+def test_the_group_march_runs_only_where_it_pays() -> None:
+    params = FeederParameters(drive_amplitude_n=40.0)
+    parts = [
+        PartSpec(0.001 * i, static_friction=0.15 + 0.01 * i, kinetic_friction=0.1) for i in range(8)
+    ]
+    sim = FeederSimulator(params, parts)
+    assert not sim._march_pays(0.01)  # a live tick of 8 groups: the global loop
+    assert sim._march_pays(1.0)
+    assert not FeederSimulator(params, parts[:3])._march_pays(1000.0)  # too few groups
+
+
 @pytest.mark.parametrize("parallel_min_groups", [1, 10**9])
 def test_many_identical_parts_leave_at_one_instant(parallel_min_groups: int) -> None:
     params = FeederParameters(drive_amplitude_n=40.0, drive_frequency_hz=20.0, track_length_m=0.002)
     parts = [PartSpec(0.001)] * 1500 + [PartSpec(0.0005, static_friction=0.3)] * 3
     sim = FeederSimulator(params, parts)
     sim.parallel_min_groups = parallel_min_groups
+    sim.march_min_work_s = 0.0
     run = sim.advance(3.0)
     exits = run.event_t_s[run.event_kind == EventKind.PART_EXIT]
     if exits.size == 0:
