@@ -2,12 +2,13 @@
 
 Pipeline (ROS-free, no clock; :meth:`VehicleEstimator.push` takes batches of accelerometer samples):
 
-1. **Input checks.** Non-finite samples are dropped (``INVALID_SAMPLES``); samples not after the
-   last accepted stamp are dropped (``OUT_OF_ORDER``); a jump back by more than ``clock_reset_s``
-   (a replayed bag, a restarted clock) resets the estimator. An interval longer than ``gap_factor``
-   times the nominal sample period is a gap (``GAP``): up to ``max_bridge_s`` it is bridged by the
-   periodic carrier model (the part is propagated through it, but the bridged time never enters the
-   window statistics); a longer gap restarts the part observer and the statistics.
+1. **Input checks.** Non-finite samples are dropped (``INVALID_SAMPLES``, counted over the window,
+   whatever the batching of the input); samples not after the last accepted stamp are dropped
+   (``OUT_OF_ORDER``); a jump back by more than ``clock_reset_s`` (a replayed bag, a restarted
+   clock) resets the estimator. An interval longer than ``gap_factor`` times the nominal sample
+   period is a gap (``GAP``): up to ``max_bridge_s`` it is bridged by the periodic carrier model
+   (the part is propagated through it, but the bridged time never enters the window statistics); a
+   longer gap restarts the part observer and the statistics.
 2. **Carrier model** (:mod:`~feeder_ros.estimation.carrier_velocity`): a harmonic fit of the last
    ``fit_window_s`` of acceleration at the response period ``n/f_d`` (``n`` by BIC), refitted every
    ``refit_interval_s``, harmonics below ``coefficient_threshold_sigma`` dropped; velocity by
@@ -37,6 +38,7 @@ DRIVE_CHANGED, SETTLING; ``status_message`` names all of them (and a poor carrie
 
 from __future__ import annotations
 
+import collections
 import contextlib
 import enum
 import math
@@ -319,6 +321,9 @@ class VehicleEstimator:
         self._observer_start = math.nan
         self._events: dict[Status, float] = {}
         self._event_notes: dict[Status, str] = {}
+        # (stamp, count) of the non-finite samples dropped per processed batch: reported summed
+        # over the window, so the report does not depend on how the input was batched
+        self._invalid: collections.deque[tuple[float, int]] = collections.deque()
         self._freq: float | None = self._command[0] if self._command is not None else None
         self._freq_refined = False
         self._scheduled: tuple[float, float] | None = None
@@ -426,7 +431,8 @@ class VehicleEstimator:
             bad = int(np.count_nonzero(~finite))
             stamps = t[np.isfinite(t)]
             when = float(stamps.max()) if stamps.size else self._last_t
-            self._note(Status.INVALID_SAMPLES, when, f"{bad} non-finite samples dropped")
+            self._invalid.append((when if math.isfinite(when) else -math.inf, bad))
+            self._note(Status.INVALID_SAMPLES, when, "")  # message: see _conditions
             t, a = t[finite], a[finite]
         if t.size and t[-1] < self._last_t - self._cfg.clock_reset_s:
             jump = self._last_t - float(t[-1])
@@ -868,10 +874,15 @@ class VehicleEstimator:
         out: dict[Status, str] = {}
         t_end = self._last_t
         w_start = t_end - cfg.window_s
+        while self._invalid and self._invalid[0][0] < w_start and math.isfinite(t_end):
+            self._invalid.popleft()  # out of the window for good (stamps only grow)
         for status in (Status.OUT_OF_ORDER, Status.INVALID_SAMPLES, Status.GAP):
             when = self._events.get(status)
             if when is not None and (when >= w_start or not math.isfinite(t_end)):
                 out[status] = self._event_notes[status]
+        if Status.INVALID_SAMPLES in out:
+            dropped = sum(n for _, n in self._invalid)
+            out[Status.INVALID_SAMPLES] = f"{dropped} non-finite samples dropped"
         when = self._events.get(Status.DRIVE_CHANGED)
         if when is not None and when >= w_start:
             out[Status.DRIVE_CHANGED] = self._event_notes[Status.DRIVE_CHANGED]

@@ -165,13 +165,40 @@ def test_nan_samples_are_dropped_and_reported(steady: SimulationResult, clean_ru
     run = _feed(est, t, a)
     rec = _record_at(run, 8.2)
     assert rec.status == Status.INVALID_SAMPLES
-    assert "non-finite" in rec.status_message
+    # the three NaNs and the broken stamp, all inside the window
+    assert rec.status_message.startswith("4 non-finite samples dropped"), rec.status_message
     clean = _record_at(clean_run, 8.2)
     assert rec.mean_speed_mps == pytest.approx(clean.mean_speed_mps, rel=0.01)
     assert run.records[-1].status == Status.OK  # once the window has passed
     assert run.records[-1].mean_speed_mps == pytest.approx(
         clean_run.records[-1].mean_speed_mps, rel=1e-3
     )
+
+
+@pytest.mark.parametrize("batch", [1, 7, 20])
+def test_dropped_samples_are_counted_over_the_window_whatever_the_batching(
+    steady: SimulationResult, batch: int
+) -> None:
+    a = _noisy(steady)
+    a[(steady.t_s >= 8.0) & (steady.t_s < 8.003)] = np.nan  # three samples
+    t = steady.t_s.copy()
+    t[np.flatnonzero(steady.t_s >= 8.1)[0]] = np.inf
+    est = VehicleEstimator(
+        EstimatorConfig(
+            part=PartModel.from_parameters(PARAMS), window_s=WINDOW_S, batch_interval_s=0.0
+        )
+    )
+    est.set_drive(PARAMS.drive_frequency_hz, PARAMS.drive_amplitude_n, 0.0)
+    start = int(np.searchsorted(steady.t_s, 7.9))
+    end = int(np.searchsorted(steady.t_s, 10.2))
+    _feed(est, t[:start], a[:start])
+    run = _feed(est, t[start:end], a[start:end], batch=batch)  # every push processed alone
+    messages = [(r.t_s, r.status_message) for r in run.records]
+    assert _record_at(run, 8.05).status_message.startswith("3 non-finite samples dropped"), messages
+    assert _record_at(run, 8.2).status_message.startswith("4 non-finite samples dropped"), messages
+    # the NaNs leave the 2 s window at 10.003 s, the broken stamp stays until about 10.1 s
+    assert _record_at(run, 10.05).status_message.startswith("1 non-finite samples dropped")
+    assert run.records[-1].status == Status.OK
 
 
 def test_gap_is_reported_bridged_and_kept_out_of_the_statistics(
