@@ -68,6 +68,7 @@ typecheck: install
 pytest: install workspace
 	@FEEDER_ROS_WORKSPACE=$(CURDIR)/$(WS) $(PY) -m pytest $(PYTEST_ARGS); status=$$?; \
 	if [ $$status -eq 5 ]; then echo "pytest collected no tests: that is a failure here" >&2; exit 1; fi; \
+	if [ $$status -ne 0 ] && [ -s $(WORK)/test-hang.log ]; then cat $(WORK)/test-hang.log >&2; fi; \
 	exit $$status
 
 test: lint typecheck pytest

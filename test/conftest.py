@@ -21,6 +21,8 @@ TEST_DIR = Path(__file__).resolve().parent
 REPO = TEST_DIR.parent
 sys.path.insert(0, str(TEST_DIR))  # the helper modules next to this file
 
+pytest_plugins = ["hard_timeout"]  # a per-test limit that also ends a test stuck in numba code
+
 # Domain ids usable with Fast DDS on Linux without port clashes: 1..101 (0 is everyone's default).
 _DOMAIN_IDS = list(range(1, 102))
 _domain_lock: IO[str] | None = None
