@@ -651,11 +651,11 @@ class FeederSimulator:
     #: one-way runs with at least this many distinct groups march the groups in parallel ...
     parallel_min_groups: int = 4
     #: ... when the chunk is long enough: ``duration_s * groups**2`` at least this [s]. The march
-    #: costs about 0.2 ms per call before it starts; the global loop's cost per simulated second
-    #: grows with the square of the group count. Measured crossover on 2 cores at A = 40 N:
-    #: about 3 s of run for 4 groups, 0.7 s for 8, 0.2 s for 16, 0.05 s for 32 (so a live
-    #: simulator's millisecond ticks stay in the global loop)
-    march_min_work_s: float = 48.0
+    #: costs about 0.1-0.2 ms per call before it starts; the global loop's cost per simulated
+    #: second grows with the square of the group count. Measured crossover (2 cores, A = 40 N,
+    #: random frictions; it moves with the event rate): 2.2 s of run for 4 groups, 0.4 s for 8,
+    #: 0.15 s for 16, below 0.1 s for 32. A live simulator's ticks stay in the global loop.
+    march_min_work_s: float = 32.0
     #: carrier pieces per parallel group pass (bounds the event buffers)
     pieces_per_pass: int = 512
 
