@@ -94,9 +94,7 @@ def test_parts_leave_at_the_track_end_in_order() -> None:
     params = FeederParameters(drive_amplitude_n=40.0, drive_frequency_hz=20.0, track_length_m=0.004)
     probe = simulate(params.with_changes(track_length_m=10.0), 2.0, 100.0)
     speed = probe.mean_part_speed_mps()[0]
-    assert abs(speed) > 1e-3, "this operating point moves parts"
-    if speed < 0:
-        pytest.skip("operating point moves parts backward")
+    assert speed > 1e-3, "this operating point moves parts forward, to the track end"
     parts = [PartSpec(0.003), PartSpec(0.0), PartSpec(0.0015)]
     run = simulate(params, 2.0, 1000.0, parts)
     exits = run.event_part[run.event_kind == EventKind.PART_EXIT]
@@ -337,6 +335,5 @@ def test_many_identical_parts_leave_at_one_instant(parallel_min_groups: int) -> 
     sim.march_min_work_s = 0.0
     run = sim.advance(3.0)
     exits = run.event_t_s[run.event_kind == EventKind.PART_EXIT]
-    if exits.size == 0:
-        pytest.skip("no part reached the track end")
+    assert exits.size > 0, "no part reached the track end"
     assert np.count_nonzero(exits == exits[0]) >= 1500
