@@ -14,6 +14,8 @@ One run measures, on the same machine and in the same process:
   (stiffness switches per second, RMS displacement, the part's mean speed and slip fraction);
 * scale: 1000 parts on one carrier (one part type; all-distinct frictions) and a Fig. 9-style sweep
   of 700 operating points x 40 s with ``simulate_many``;
+* the choice between the global event loop and the group march (``march_min_work_s``): one
+  ``advance`` of a few part types by each path, for short and long chunks;
 * a live run as the simulator node does it under a ramping drive interface (a ramped command and
   a 20 ms advance per tick): the cost of a tick at the start and at the end of the run, with the
   drive schedule forgetting past changes (the engine) and keeping them all (the baseline).
@@ -347,6 +349,55 @@ def sweep(duration_s: float, n_freq: int, n_amp: int) -> list[str]:
     ]
 
 
+def march_crossover(group_counts: tuple[int, ...], durations_s: tuple[float, ...]) -> list[str]:
+    """One ``advance`` (A = 40 N, output every 1 ms) of ``G`` part types by the global event loop
+    and by the group march, each forced, and the path ``FeederSimulator`` chooses."""
+    params = FeederParameters(drive_amplitude_n=40.0)
+    rng = np.random.default_rng(1)
+    lines = [
+        "#### Global event loop or group march (A = 40 N, undamped, random frictions, output 1 ms)",
+        "",
+        "| part types | chunk [s] | global loop [ms] | group march [ms] | march / global | "
+        "chosen (`march_min_work_s`) |",
+        "| ---: | ---: | ---: | ---: | ---: | --- |",
+    ]
+    for count in group_counts:
+        mu_s = rng.uniform(0.15, 0.3, count)
+        mu_d = mu_s * rng.uniform(0.4, 0.9, count)
+        parts = tuple(
+            PartSpec(
+                position_m=0.25 * i / count, static_friction=float(s), kinetic_friction=float(d)
+            )
+            for i, (s, d) in enumerate(zip(mu_s, mu_d, strict=True))
+        )
+        for duration in durations_s:
+            times = simulation._sample_times(duration, RATE_HZ)
+
+            def run(
+                march: bool,
+                parts: tuple[PartSpec, ...] = parts,
+                duration: float = duration,
+                times: np.ndarray = times,
+            ) -> None:
+                sim = FeederSimulator(params, parts)
+                sim.parallel_min_groups = 1 if march else 1 << 62
+                sim.march_min_work_s = 0.0
+                sim.advance(duration, times)
+
+            run(False)
+            run(True)  # first calls (caches) not timed
+            repeats = 20 if duration < 1.0 else 5
+            _, loop = timed(lambda: run(False), repeats)
+            _, march = timed(lambda: run(True), repeats)
+            chosen = FeederSimulator(params, parts)._march_pays(duration)
+            lines.append(
+                f"| {count} | {duration:g} | {loop * 1e3:.3f} | {march * 1e3:.3f} | "
+                f"{march / loop:.3g} | {'march' if chosen else 'global loop'} |"
+            )
+    lines.append("")
+    return lines
+
+
 def live_ticks(ticks: int, forget_after: int) -> tuple[float, float, int]:
     """A live run of ``ticks`` 20 ms ticks, each with a command ramped over the tick (what the
     drive interface sends while ramping or tracking); returns the mean wall time per tick over the
@@ -402,6 +453,7 @@ def main(argv: list[str] | None = None) -> int:
         cases = [Case(0.4, 0.0, 0.3), Case(40.0, DAMPING, 0.2)]
         parts_run, parts_count = 0.2, 20
         sweep_args = (0.2, 4, 2)
+        crossover_args: tuple[tuple[int, ...], tuple[float, ...]] = ((4,), (0.05,))
         ticks = 40
     else:
         cases = [
@@ -412,6 +464,7 @@ def main(argv: list[str] | None = None) -> int:
         ]
         parts_run, parts_count = 10.0, 1000
         sweep_args = (40.0, 35, 20)
+        crossover_args = ((4, 8, 16, 32, 64), (0.1, 1.0, 10.0))
         ticks = 1500
 
     # compile the numba kernels once, outside the timings
@@ -445,6 +498,7 @@ def main(argv: list[str] | None = None) -> int:
         print(f"done: {case.name}", file=sys.stderr, flush=True)
     lines += many_parts(parts_run, parts_count)
     lines += sweep(*sweep_args)
+    lines += march_crossover(*crossover_args)
     lines += live_drive(ticks)
     report = "\n".join(lines)
     print(report)

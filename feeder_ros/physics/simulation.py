@@ -652,9 +652,10 @@ class FeederSimulator:
     parallel_min_groups: int = 4
     #: ... when the chunk is long enough: ``duration_s * groups**2`` at least this [s]. The march
     #: costs about 0.1-0.2 ms per call before it starts; the global loop's cost per simulated
-    #: second grows with the square of the group count. Measured crossover (2 cores, A = 40 N,
-    #: random frictions; it moves with the event rate): 2.2 s of run for 4 groups, 0.4 s for 8,
-    #: 0.15 s for 16, below 0.1 s for 32. A live simulator's ticks stay in the global loop.
+    #: second grows with the square of the group count. The crossover (``bench_physics.py``,
+    #: "Global event loop or group march"; it moves with the event rate) lies between 1 and 10 s
+    #: of run for 4 groups, 0.1 and 1 s for 8 and 16, below 0.1 s for 32. A live simulator's
+    #: ticks stay in the global loop.
     march_min_work_s: float = 32.0
     #: carrier pieces per parallel group pass (bounds the event buffers)
     pieces_per_pass: int = 512
