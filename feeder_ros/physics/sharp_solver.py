@@ -654,7 +654,11 @@ def _shifted_samples(
     r00, r01, r02, r03, r04 = rows[0, 0], rows[0, 1], rows[0, 2], rows[0, 3], rows[0, 4]
     r10, r11, r12, r13, r14 = rows[1, 0], rows[1, 1], rows[1, 2], rows[1, 3], rows[1, 4]
     r20, r21, r22, r23, r24 = rows[2, 0], rows[2, 1], rows[2, 2], rows[2, 3], rows[2, 4]
-    b = int(mode)
+    if held:  # the carrier at rest: x' = x'' = 0 (the basis values are finite)
+        r10 = r11 = r12 = r13 = r14 = r20 = r21 = r22 = r23 = r24 = 0.0
+    out_cb[ns : ns + nb] = int(mode)
+    # a branch-free loop body, which LLVM vectorises (in a stand-alone harness, 43 against 84 us
+    # per 10,000 samples for the loop that tested ``held`` and stored the branch per sample)
     for i in range(nb):
         j = jb + 1 + i
         dt = (samples[ns + i] - t0) - (tb + j * h_nom)
@@ -671,13 +675,8 @@ def _shifted_samples(
         sn = snr + dt * (w * csr)
         cs = csr - dt * (w * snr)
         out_cx[ns + i] = r00 * cc + r01 * ss + r02 * sn + r03 * cs + r04
-        out_cb[ns + i] = b
-        if held:
-            out_cv[ns + i] = 0.0
-            out_ca[ns + i] = 0.0
-        else:
-            out_cv[ns + i] = r10 * cc + r11 * ss + r12 * sn + r13 * cs + r14
-            out_ca[ns + i] = r20 * cc + r21 * ss + r22 * sn + r23 * cs + r24
+        out_cv[ns + i] = r10 * cc + r11 * ss + r12 * sn + r13 * cs + r14
+        out_ca[ns + i] = r20 * cc + r21 * ss + r22 * sn + r23 * cs + r24
 
 
 @njit(cache=True, inline="always")
@@ -837,6 +836,7 @@ def advance(
     lam = 0.0
     root = 0.0
     r1 = 0.0
+    e_cc = e_ss = e_sn = e_cs = e_bc = e_bs = 0.0  # the basis (and bounds) at the last event
     while True:
         if not cont:
             t0 = state[S_T]
@@ -989,6 +989,9 @@ def advance(
             ss = 0.0
             sn, cs = _sincos(phi)
             bc, bs = _basis_bounds(0.0, sigma, lam, root, r1)
+        elif cont:
+            # after a part event: the basis at the event (the stop that found it)
+            cc, ss, sn, cs, bc, bs = e_cc, e_ss, e_sn, e_cs, e_bc, e_bs
         else:
             cc, ss, sn, cs, bc, bs = _basis_all(ts, sigma, lam, root, r1, w, phi)
         stick_bound = _row_bound(rows, 2, bc, bs)
@@ -1042,7 +1045,7 @@ def advance(
             if lam < 0.0:
                 r_R[r] = math.sqrt(rows[r, 0] ** 2 + (rows[r, 1] / root) ** 2)
         tau = ts
-        e_cc, e_ss, e_sn, e_cs = cc, ss, sn, cs
+        e_cc, e_ss, e_sn, e_cs, e_bc, e_bs = cc, ss, sn, cs, bc, bs
         if hit < 0:
             for r in range(6):
                 vals[r] = 0.0
@@ -1050,8 +1053,11 @@ def advance(
             # undamped: the basis bounds (1, 1/root) and so the row bounds are constant
             const_bounds = sigma == 0.0 and lam < 0.0
             bounds_done = False
+            at_ts = True  # the first stop is ts, whose basis values are those of the release
             while True:
-                cc, ss, sn, cs, bc, bs = _basis_all(tau, sigma, lam, root, r1, w, phi)
+                if not at_ts:
+                    cc, ss, sn, cs, bc, bs = _basis_all(tau, sigma, lam, root, r1, w, phi)
+                at_ts = False
                 if held:
                     vals[0] = rows[0, 4]
                     bnds[0] = abs(rows[0, 4])
@@ -1109,7 +1115,7 @@ def advance(
                         t_next = f_skip[i]
                 if hit >= 0:
                     tau_e = tau
-                    e_cc, e_ss, e_sn, e_cs = cc, ss, sn, cs
+                    e_cc, e_ss, e_sn, e_cs, e_bc, e_bs = cc, ss, sn, cs, bc, bs
                     break
                 if t_next >= T:
                     tau_e = T
