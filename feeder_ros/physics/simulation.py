@@ -427,43 +427,55 @@ class FeederSimulator:
         self._g, self._m = g, m
 
     def _spawn_few(self, specs: Sequence[PartSpec], kappa_g: float) -> None:
-        """:meth:`_spawn_initial` for a few parts: the same arrays, built in plain Python (the
-        vectorised form costs more than the simulation of a short run)."""
+        """:meth:`_spawn_initial` for a few parts: the same arrays, built from plain Python lists
+        (the vectorised form, or numpy element by element, costs more than the simulation of a
+        short run)."""
         N = len(specs)
         resolved = [spec.resolved(self._params) for spec in specs]
         friction = [(mu_s * kappa_g, mu_d * kappa_g) for _, mu_s, mu_d in resolved]
         keys = sorted(set(friction))  # the order of np.unique(axis=0)
         index = {key: i for i, key in enumerate(keys)}
         G = len(keys)
-        group = np.array([index[f] for f in friction], np.int64)
-        offset = np.array([spec.position_m for spec in specs], dtype=np.float64)
-        mass = np.array([r[0] for r in resolved], dtype=np.float64)
-        g = _Groups(G)
-        g.L[:] = [key[0] for key in keys]
-        g.D[:] = [key[1] for key in keys]
-        g.u[:] = self._state[_k.S_V]
-        nxt = np.full(N, -1, np.int64)
+        group = [index[f] for f in friction]
+        offset = [spec.position_m for spec in specs]
+        mass = [r[0] for r in resolved]
+        g_mass = [0.0] * G
+        g_lead = [-math.inf] * G
+        g_head = [-1] * G
+        nxt = [-1] * N
         last = [-1] * G
         for i in range(N):
-            gi = int(group[i])
-            g.mass[gi] += mass[i]
-            if offset[i] > g.lead[gi]:
-                g.lead[gi] = offset[i]
+            gi = group[i]
+            g_mass[gi] += mass[i]
+            if offset[i] > g_lead[gi]:
+                g_lead[gi] = offset[i]
             if last[gi] < 0:
-                g.head[gi] = i
+                g_head[gi] = i
             else:
                 nxt[last[gi]] = i
             last[gi] = i
-        m = _Members()
+        v0 = float(self._state[_k.S_V])
+        g = _Groups.__new__(_Groups)  # every field set below
+        g.size = G
+        g.L = np.array([key[0] for key in keys], np.float64)
+        g.D = np.array([key[1] for key in keys], np.float64)
+        g.mass = np.array(g_mass, np.float64)
+        g.u = np.array([v0] * G, np.float64)
+        g.y = np.zeros(G)
+        g.slip = np.zeros(G)
+        g.lead = np.array(g_lead, np.float64)
+        g.phase = np.zeros(G, np.int8)
+        g.head = np.array(g_head, np.int64)
+        m = _Members.__new__(_Members)  # every field set below
         m.size = N
-        m.group = group
-        m.next = nxt
-        m.offset = offset
-        m.mass = mass
+        m.group = np.array(group, np.int64)
+        m.next = np.array(nxt, np.int64)
+        m.offset = np.array(offset, np.float64)
+        m.mass = np.array(mass, np.float64)
         m.slip0 = np.zeros(N)
-        m.exit_t = np.full(N, np.nan)
+        m.exit_t = np.array([math.nan] * N, np.float64)
         m.start_t = np.zeros(N)
-        m.start_x = offset + self._state[_k.S_X]
+        m.start_x = m.offset + self._state[_k.S_X]
         self._g, self._m = g, m
 
     def _regroup(self) -> None:
@@ -588,6 +600,11 @@ class FeederSimulator:
                     f"sample_times_s [{samples[0]!r}, {samples[-1]!r}] outside "
                     f"[{self.time_s!r}, {t_end!r}]"
                 )
+        return self._advance(t_end, samples)
+
+    def _advance(self, t_end: float, samples: F64) -> SimulationResult:
+        """:meth:`advance` on checked arguments (finite ``t_end`` >= the simulator time; finite,
+        sorted, contiguous float64 ``samples`` inside the chunk)."""
         n, N = samples.size, len(self._specs)
         t_start = self.time_s
         march = self._params.coupling == "one_way" and self._march_pays(t_end - t_start)
@@ -629,10 +646,17 @@ class FeederSimulator:
             pt, pk, pp = zip(*self._pending_events, strict=True)
             chunks.insert(0, (np.array(pt), np.array(pk, np.int8), np.array(pp, np.int64)))
             self._pending_events = []
-        event_t = np.concatenate([c[0] for c in chunks])
-        event_kind = np.concatenate([c[1] for c in chunks]).astype(np.int8)
-        event_part = np.concatenate([c[2] for c in chunks]).astype(np.int64)
-        order = _k.stable_time_order(event_t)
+        if len(chunks) == 1 and _k.check_samples(chunks[0][0]) == 0:
+            # one chunk (fresh copies) already in time order: as it is
+            event_t = chunks[0][0]
+            event_kind = chunks[0][1].astype(np.int8, copy=False)
+            event_part = chunks[0][2].astype(np.int64, copy=False)
+        else:
+            event_t = np.concatenate([c[0] for c in chunks])
+            order = _k.stable_time_order(event_t)
+            event_t = event_t[order]
+            event_kind = np.concatenate([c[1] for c in chunks]).astype(np.int8)[order]
+            event_part = np.concatenate([c[2] for c in chunks]).astype(np.int64)[order]
         return SimulationResult(
             t_s=samples,
             carrier_x_m=out_cx,
@@ -642,9 +666,9 @@ class FeederSimulator:
             part_x_m=out_px,
             part_v_mps=out_pv,
             part_phase=out_pp,
-            event_t_s=event_t[order],
-            event_kind=event_kind[order],
-            event_part=event_part[order],
+            event_t_s=event_t,
+            event_kind=event_kind,
+            event_part=event_part,
             **self._totals(),
         )
 
@@ -1009,7 +1033,7 @@ def simulate(
         result: SimulationResult = simulate_smooth(params, duration_s, output_rate_hz, parts, drive)
         return result
     sim = FeederSimulator(params, parts, drive)
-    return sim.advance(float(duration_s), samples)
+    return sim._advance(float(duration_s), samples)
 
 
 def simulate_carrier(
