@@ -379,6 +379,13 @@ def _record_piece(pieces, k, t0, length, sigma, lam, root, r1, w, phi, mode, row
 NODE_RAD = 0.25  # node spacing in radians of the piece's fastest rate
 NODE_MAX = 4096  # nodes per piece at most
 TAB_WIDTH = 5  # x, x', x'', x''', x'''' at a node
+# per-piece columns of ``bnd`` after the bounds of x .. x^(5): the start's sin(phi), cos(phi) and
+# basis bounds, which every group of a pass needs at the piece's start
+BND_SIN_PHI = 6
+BND_COS_PHI = 7
+BND_BC0 = 8
+BND_BS0 = 9
+BND_WIDTH = 10
 
 
 @njit(cache=True)
@@ -404,7 +411,8 @@ def piece_tables(pieces, n_pieces):
     """Node tables of the recorded pieces, shared by all groups: ``(node_start, node_h, tab,
     bnd)``. Piece ``k`` has nodes ``node_start[k] .. node_start[k + 1] - 1`` at local times
     ``i*node_h[k]`` (the last at the piece's end), ``tab[node] = x .. x''''`` there (exact closed
-    form), and ``bnd[k, r]`` bounds ``|x^(r)|`` over the whole piece (r = 0 .. 5)."""
+    form), and ``bnd[k, r]`` bounds ``|x^(r)|`` over the whole piece (r = 0 .. 5); ``bnd[k,
+    BND_SIN_PHI:]`` holds the drive phase's sine and cosine and the basis bounds at its start."""
     node_start = np.zeros(n_pieces + 1, np.int64)
     node_h = np.zeros(n_pieces)
     for k in range(n_pieces):
@@ -412,7 +420,7 @@ def piece_tables(pieces, n_pieces):
         node_start[k + 1] = node_start[k] + n
         node_h[k] = h
     tab = np.empty((node_start[n_pieces], TAB_WIDTH))
-    bnd = np.zeros((n_pieces, 6))
+    bnd = np.zeros((n_pieces, BND_WIDTH))
     for k in range(n_pieces):  # serial: a pass has few pieces, each costs microseconds
         rows = np.zeros((6, 5))
         for r in range(6):
@@ -427,6 +435,9 @@ def piece_tables(pieces, n_pieces):
         bc, bs = _basis_bounds(0.0, sigma, lam, root, r1)
         for r in range(6):
             bnd[k, r] = _row_bound(rows, r, bc, bs)
+        bnd[k, BND_SIN_PHI], bnd[k, BND_COS_PHI] = _sincos(phi)
+        bnd[k, BND_BC0] = bc
+        bnd[k, BND_BS0] = bs
         a = node_start[k]
         n = node_start[k + 1] - a
         for i in range(n):
@@ -1558,7 +1569,6 @@ def _march_group(
             for j in range(5):
                 rows[r, j] = pieces[k, P_ROWS + 5 * r + j]
         bounds_ready = False  # the certified search's per-row bound data (set up when needed)
-        sphi, cphi = _sincos(phi)
         last = k == n_pieces - 1
         base = node_start[k]
         nk = node_start[k + 1] - base
@@ -1572,8 +1582,8 @@ def _march_group(
             if ev_n[g] + 2 > cap:
                 return STATUS_BUFFER_FULL
             if ts == 0.0:
-                cc, ss, sn, cs = 1.0, 0.0, sphi, cphi
-                bc, bs = _basis_bounds(0.0, sigma, lam, root, r1)
+                cc, ss, sn, cs = 1.0, 0.0, bnd[k, BND_SIN_PHI], bnd[k, BND_COS_PHI]
+                bc, bs = bnd[k, BND_BC0], bnd[k, BND_BS0]
             elif not at_ts:
                 cc, ss, sn, cs, bc, bs = _basis_all(ts, sigma, lam, root, r1, w, phi)
             at_ts = False
