@@ -16,15 +16,20 @@ Choices, and why:
   and every point still runs in the one parallel call.
 * **Endless track.** The sweep measures conveying speed, not the track: points run with
   ``track_length_m`` = :data:`ENDLESS_TRACK_M`, so no part leaves during a long window.
-* **Distance instead of a window** (the paper timed parts over 8.5 cm): a first parallel pass
-  measures a rough speed over :data:`PROBE_WINDOW_S` after the settle time, which brackets the
-  time the part needs for the distance; bisection on the exact travel (``mean speed * window``,
-  one exact run per trial window, as windows differ between points) then finds that time to
-  :data:`TRAVEL_TOLERANCE_S`. A part advances in bursts (slip) with stands between them (stick),
-  so ``distance / rough speed`` alone would be off by up to a burst. The reported ``duration_s``
-  is that time and the speed ``distance / duration_s`` (exact for the window). A point whose
-  part does not move forward, or would need more than ``max_window_s``, is measured over
-  ``max_window_s`` and marked not ok with the reason (the paper kept only moving parts).
+* **Distance instead of a window** (the paper timed parts over 8.5 cm): the distance is measured
+  along the track, as light barriers on the track see it (the live sweep's part sensors), and
+  timed from ``settle_s`` to the first instant the part's front has moved ``distance_m`` along
+  the track. One exact run per point
+  (:class:`~feeder_ros.physics.simulation.FeederSimulator`): at ``settle_s`` the track is cut
+  (``set_parameters``) to end ``distance_m`` ahead of the part, and the engine locates the part's
+  exit like any other event, exact to round-off. (A part advances in bursts, slip, with stands
+  between them, stick, and at times slips back: neither ``distance / speed`` nor a bisection on
+  the travel finds that first instant.) The reported ``duration_s`` is that time and the speed
+  ``distance_m / duration_s``. The part starts at :data:`TRAVEL_ORIGIN_M` on the endless track, so
+  a part that slid back during the settle time still has a track end ahead of it. A point whose
+  part does not get there within ``max_window_s`` is measured over ``max_window_s`` (its travel
+  along the track over that time) and marked not ok with the reason (the paper kept only moving
+  parts).
 """
 
 from __future__ import annotations
@@ -36,16 +41,17 @@ import numpy as np
 
 from feeder_ros.identification.sweep import SweepPlan, SweepPoint, SweepResult
 from feeder_ros.physics.parameters import FeederParameters
-from feeder_ros.physics.simulation import PartSpec, simulate_many
+from feeder_ros.physics.simulation import FeederSimulator, PartSpec, simulate_many
 
-__all__ = ["ENDLESS_TRACK_M", "PROBE_WINDOW_S", "offline_points", "offline_sweep"]
+__all__ = ["ENDLESS_TRACK_M", "TRAVEL_ORIGIN_M", "offline_points", "offline_sweep", "travel_time"]
 
 #: track length of the offline points: no part reaches its end within any window
 ENDLESS_TRACK_M = 1.0e6
-#: distance mode: the window of the rough-speed pass (or max_window_s if shorter)
-PROBE_WINDOW_S = 1.0
-#: distance mode: the time to travel the distance is found to this (bisection)
-TRAVEL_TOLERANCE_S = 1e-4
+#: distance mode: where the part starts on the endless track (room to slide back; positions
+#: there still resolve 1e-14 m)
+TRAVEL_ORIGIN_M = 100.0
+#: distance mode: simulated seconds per advance while waiting for the part to arrive
+TRAVEL_CHUNK_S = 2.0
 #: points per parallel call (progress is reported between calls)
 CHUNK_POINTS = 256
 
@@ -84,31 +90,39 @@ def _measure(
     return summary.mean_part_speed_mps, summary.slip_fraction
 
 
-def _time_to_travel(
-    point: FeederParameters, distance: float, settle_s: float, guess_s: float, limit_s: float
-) -> float | None:
-    """The first window after ``settle_s`` over which the part travels ``distance`` (to
-    :data:`TRAVEL_TOLERANCE_S`), or None if it does not within ``limit_s``.
+def travel_time(
+    point: FeederParameters, distance_m: float, settle_s: float, limit_s: float
+) -> tuple[float | None, float, float]:
+    """How long after ``settle_s`` the part of ``point`` (put down at rest at t = 0) needs to move
+    ``distance_m`` forward along the track: ``(duration_s or None, speed m/s, slip fraction)``.
 
-    The travel grows in bursts (slip) and stands still between them (stick), so the window is
-    bracketed and bisected on the exact travel ``mean speed * window``, not iterated."""
-
-    def travel(window: float) -> float:
-        speed, _ = _measure([point], window, settle_s)
-        return float(speed[0]) * window
-
-    lo, hi = 0.0, min(max(1.25 * guess_s, TRAVEL_TOLERANCE_S), limit_s)
-    while not travel(hi) >= distance:
-        if hi >= limit_s:
-            return None
-        lo, hi = hi, min(2.0 * hi, limit_s)
-    while hi - lo > TRAVEL_TOLERANCE_S:
-        mid = 0.5 * (lo + hi)
-        if travel(mid) >= distance:
-            hi = mid
-        else:
-            lo = mid
-    return hi
+    The duration is exact: the engine's exit event on a track cut at ``settle_s`` to end
+    ``distance_m`` ahead of the part. The speed is ``distance_m / duration_s`` and the slip
+    fraction is over that window. None: not within ``limit_s``; speed (the travel along the track)
+    and slip fraction are then over ``limit_s``."""
+    if not (math.isfinite(distance_m) and distance_m > 0.0):
+        raise ValueError(f"distance_m={distance_m!r} must be a positive number")
+    sim = FeederSimulator(point, (PartSpec(position_m=TRAVEL_ORIGIN_M),))
+    y0, slip0 = TRAVEL_ORIGIN_M, 0.0  # track position of the part and its slip time at settle_s
+    if settle_s > 0.0:
+        start = sim.advance(settle_s)
+        if math.isfinite(float(start.part_exit_t_s[0])):
+            raise ValueError(f"the part left the track before settle_s={settle_s!r} s")
+        y0 = float(start.part_end_x_m[0]) - sim.carrier_state[0]  # lab - carrier
+        slip0 = float(start.part_slip_time_s[0])
+    sim.set_parameters(point.with_changes(track_length_m=y0 + distance_m))
+    end = settle_s + limit_s
+    while True:
+        result = sim.advance(min(sim.time_s + TRAVEL_CHUNK_S, end))
+        exit_t = float(result.part_exit_t_s[0])
+        if math.isfinite(exit_t) or sim.time_s >= end:
+            break
+    slip = float(result.part_slip_time_s[0]) - slip0
+    if math.isfinite(exit_t):
+        duration = exit_t - settle_s
+        return duration, distance_m / duration, min(max(slip / duration, 0.0), 1.0)
+    travel = float(result.part_end_x_m[0]) - sim.carrier_state[0] - y0
+    return None, travel / limit_s, min(max(slip / limit_s, 0.0), 1.0)
 
 
 def offline_sweep(
@@ -136,15 +150,11 @@ def offline_sweep(
     else:
         distance = plan.distance_m
         assert distance is not None
-        probe = min(PROBE_WINDOW_S, plan.max_window_s)
-        rough, _ = _measure([g[3] for g in grid], probe, plan.settle_s)
         for k, (_, _, _, point) in enumerate(grid):
-            v = float(rough[k])
-            guess = distance / v if v > 0.0 else plan.max_window_s
-            found = _time_to_travel(point, distance, plan.settle_s, guess, plan.max_window_s)
+            found, speeds[k], slips[k] = travel_time(
+                point, distance, plan.settle_s, plan.max_window_s
+            )
             durations[k] = found if found is not None else plan.max_window_s
-            speed, slip = _measure([point], float(durations[k]), plan.settle_s)
-            speeds[k], slips[k] = float(speed[0]), float(slip[0])
             if found is None:
                 ok[k] = False
                 reasons[k] = (

@@ -11,7 +11,12 @@ import numpy as np
 import pytest
 
 from feeder_ros.cli.sim import default_config_path, load_parameters
-from feeder_ros.identification.offline_sweep import ENDLESS_TRACK_M, offline_sweep
+from feeder_ros.identification.offline_sweep import (
+    ENDLESS_TRACK_M,
+    offline_points,
+    offline_sweep,
+    travel_time,
+)
 from feeder_ros.identification.sweep import (
     CSV_COLUMNS,
     SweepDataError,
@@ -23,7 +28,7 @@ from feeder_ros.identification.sweep import (
     parse_orders,
     parse_values,
 )
-from feeder_ros.physics.simulation import PartSpec, simulate_many
+from feeder_ros.physics.simulation import FeederSimulator, PartSpec, simulate_many
 
 REALISTIC = load_parameters(default_config_path(), preset="realistic")
 
@@ -189,18 +194,44 @@ def test_offline_sweep_equals_direct_simulate_many() -> None:
     assert all(q.speed_mps > 0.01 for q in result.points)  # the resonance near 20.5 Hz
 
 
-def test_offline_distance_mode_travels_the_distance() -> None:
+def test_offline_distance_mode_times_the_first_arrival_along_the_track() -> None:
     p = plan(frequencies_hz="20:22:1", amplitudes_percent=[1, 40], distance_m=0.01, window_s=None)
     result = offline_sweep(REALISTIC, p)
     moving = [q for q in result.points if q.amplitude_percent == 40.0]
     assert all(q.ok for q in moving)
-    for q in moving:  # windows refined until the part travels the distance
-        assert q.speed_mps * q.duration_s == pytest.approx(0.01, rel=2e-3)
+    for q in moving:
+        assert q.speed_mps == 0.01 / q.duration_s
+        # an independent run on the endless track, sampled densely: the part's track position
+        # (lab - carrier) is 1 cm ahead of where it was at settle_s exactly at the reported end
+        # of the window, and not before
+        point = REALISTIC.with_changes(
+            drive_frequency_hz=q.frequency_hz,
+            drive_amplitude_n=q.amplitude_n,
+            part_mass_kg=q.part_mass_kg,
+            track_length_m=ENDLESS_TRACK_M,
+        )
+        end = p.settle_s + q.duration_s
+        t = np.concatenate([np.linspace(p.settle_s, end, 20001), [end + 0.01]])
+        run = FeederSimulator(point, (PartSpec(),))
+        run.advance(p.settle_s)
+        samples = run.advance(end + 0.01, t)
+        travel = samples.part_x_m[:, 0] - samples.carrier_x_m
+        travel -= travel[0]
+        assert travel[-2] == pytest.approx(0.01, abs=1e-12)
+        assert np.all(travel[:-2] < 0.01)
     # at 1 N the carrier never reaches the slip threshold: the part sticks and goes nowhere
     still = [q for q in result.points if q.amplitude_percent == 1.0]
     assert all(not q.ok for q in still)
     assert all(q.duration_s == p.max_window_s for q in still)
+    assert all(abs(q.speed_mps) < 1e-12 and q.slip_fraction == 0.0 for q in still)
     assert "did not travel 0.01 m within max_window_s=60 s" in still[0].reason
+
+
+@pytest.mark.parametrize("distance", [0.0, -0.01, math.nan, math.inf])
+def test_travel_time_refuses_a_bad_distance(distance: float) -> None:
+    point = offline_points(REALISTIC, plan())[0][3]
+    with pytest.raises(ValueError, match=f"distance_m={distance!r} must be a positive number"):
+        travel_time(point, distance, 0.5, 10.0)
 
 
 def test_offline_sweep_refuses_the_smooth_model() -> None:
