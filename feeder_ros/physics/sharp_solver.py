@@ -311,6 +311,40 @@ def _basis_all(tau, sigma, lam, root, r1, w, phi):
     return cc, ss, sa, ca, bc, bs
 
 
+# a point this close to one whose basis is known (in radians of the piece's fastest rate) gets
+# its basis by a shift from there, with Taylor series: exact to round-off (the first term left out
+# is below 1e-20), and no exponential or sine is evaluated
+SHIFT_RAD = 1e-3
+
+
+@njit(cache=True, inline="always")
+def _shift_basis(dt, sigma, lam, w, cc, ss, sn, cs):
+    """The basis ``dt`` later (``|dt| * rate <= SHIFT_RAD``): ``C(t+dt) = C(dt)C(t) +
+    lam*S(dt)S(t)``, ``S(t+dt) = S(dt)C(t) + C(dt)S(t)`` (the fundamental solution of ``C' =
+    sigma*C + lam*S``, ``S' = sigma*S + C``) and the drive's angle addition, with ``C(dt)``,
+    ``S(dt)``, ``sin(w*dt)``, ``cos(w*dt)`` from their Taylor series to the fifth or sixth power."""
+    s2 = sigma * sigma
+    a2 = 0.5 * (s2 + lam)
+    a3 = sigma * (s2 + 3.0 * lam) / 6.0
+    a4 = (s2 * s2 + 6.0 * s2 * lam + lam * lam) / 24.0
+    a5 = sigma * (s2 * s2 + 10.0 * s2 * lam + 5.0 * lam * lam) / 120.0
+    b3 = (3.0 * s2 + lam) / 6.0
+    b4 = sigma * (s2 + lam) / 6.0
+    b5 = (5.0 * s2 * s2 + 10.0 * s2 * lam + lam * lam) / 120.0
+    c1 = 1.0 + dt * (sigma + dt * (a2 + dt * (a3 + dt * (a4 + dt * a5))))
+    s1 = dt * (1.0 + dt * (sigma + dt * (b3 + dt * (b4 + dt * b5))))
+    x = w * dt
+    x2 = x * x
+    sw = x * (1.0 - x2 / 6.0 * (1.0 - x2 / 20.0))
+    cw = 1.0 - 0.5 * x2 * (1.0 - x2 / 12.0 * (1.0 - x2 / 30.0))
+    return (
+        c1 * cc + lam * s1 * ss,
+        s1 * cc + c1 * ss,
+        sn * cw + cs * sw,
+        cs * cw - sn * sw,
+    )
+
+
 @njit(cache=True, inline="always")
 def _row(rows, r, cc, ss, sn, cs):
     return rows[r, 0] * cc + rows[r, 1] * ss + rows[r, 2] * sn + rows[r, 3] * cs + rows[r, 4]
@@ -1795,9 +1829,22 @@ def _march_group(
                         if not lo < x < hi:
                             x = 0.5 * (lo + hi)
                         solved = False
+                        # the second and later iterates are usually within SHIFT_RAD of the last:
+                        # their basis is shifted from there
+                        shift_max = SHIFT_RAD / max(abs(sigma) + root, w, 1e-300)
+                        x_b = np.nan  # where the basis values were taken
                         for _it in range(100):
                             tau = ts + x
-                            cc, ss, sn, cs, bc, bs = _basis_all(tau, sigma, lam, root, r1, w, phi)
+                            if abs(x - x_b) <= shift_max:
+                                cc, ss, sn, cs = _shift_basis(
+                                    x - x_b, sigma, lam, w, cc, ss, sn, cs
+                                )
+                                bc, bs = _basis_bounds(tau, sigma, lam, root, r1)
+                            else:
+                                cc, ss, sn, cs, bc, bs = _basis_all(
+                                    tau, sigma, lam, root, r1, w, phi
+                                )
+                            x_b = x
                             f = sg * _row(rows, fr, cc, ss, sn, cs) + c0 + c1 * x
                             d = sg * _row(rows, fr + 1, cc, ss, sn, cs) + c1
                             f2 = sg * _row(rows, fr + 2, cc, ss, sn, cs)

@@ -145,6 +145,34 @@ def _expand_reference(
     return [r[0] for r in rows], [r[1] for r in rows], [r[2] for r in rows]
 
 
+@pytest.mark.parametrize(
+    ("sigma", "lam"),
+    [
+        (0.0, -(207.0**2)),  # undamped (the paper's case)
+        (-13.0, 13.0**2 - 207.0**2),  # under-damped
+        (-400.0, 400.0**2 - 207.0**2),  # over-damped
+        (-207.0, 0.0),  # critically damped
+    ],
+)
+def test_shifted_basis_equals_the_direct_basis(sigma: float, lam: float) -> None:
+    """The Halley iteration's shortcut: the basis a short step away, by Taylor series."""
+    root = float(np.sqrt(abs(lam)))
+    r1 = (sigma * sigma - lam) / (sigma - root) if lam > 0.0 else 0.0  # sigma + root, as the kernel
+    w = 2.0 * np.pi * 31.0
+    rate = max(abs(sigma) + root, w)
+    rng = np.random.default_rng(7)
+    for _ in range(200):
+        tau = float(rng.uniform(0.0, 0.05))
+        phi = float(rng.uniform(-np.pi, np.pi))
+        dt = float(rng.uniform(-1.0, 1.0)) * k.SHIFT_RAD / rate
+        here = k._basis(tau, sigma, lam, root, r1, w, phi)
+        shifted = k._shift_basis(dt, sigma, lam, w, *here)
+        direct = k._basis(tau + dt, sigma, lam, root, r1, w, phi)
+        bc, bs = k._basis_bounds(min(tau, tau + dt), sigma, lam, root, r1)
+        for got, want, scale in zip(shifted, direct, (bc, bs, 1.0, 1.0), strict=True):
+            assert abs(got - want) <= 1e-14 * scale, (tau, dt, got, want)
+
+
 def test_group_events_expand_to_the_members_present() -> None:
     rng = np.random.default_rng(3)
     G, N, cap = 5, 17, 9
