@@ -1033,7 +1033,8 @@ def simulate(
         result: SimulationResult = simulate_smooth(params, duration_s, output_rate_hz, parts, drive)
         return result
     sim = FeederSimulator(params, parts, drive)
-    return sim._advance(float(duration_s), samples)
+    # the last sample (a multiple of 1/rate) may lie a round-off past duration_s: run to it
+    return sim._advance(max(float(duration_s), float(samples[-1])), samples)
 
 
 def simulate_carrier(

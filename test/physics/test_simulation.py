@@ -68,6 +68,21 @@ def test_result_shapes_and_sample_times(case_study: FeederParameters) -> None:
     assert run.branch[1] == 1  # the first branch is the forward one
 
 
+@pytest.mark.parametrize("model", ["sharp", "logistic"])
+def test_a_duration_a_round_off_short_of_a_sample_time_still_samples_it(model: str) -> None:
+    """0.1 - 1e-14 s at 10 Hz: the sample at 0.1 s (a multiple of 1/rate) is simulated, not
+    refused and not left unwritten."""
+    params = FeederParameters(drive_amplitude_n=40.0, stiffness_model=model)
+    run = simulate(params, 0.1 - 1e-14, 10.0)
+    np.testing.assert_array_equal(run.t_s, [0.0, 0.1])
+    exact = simulate(params, 0.1, 10.0)
+    for name in ("carrier_x_m", "carrier_v_mps", "carrier_a_mps2", "part_x_m", "part_v_mps"):
+        values = getattr(run, name)
+        assert np.all(np.isfinite(values)), name
+        np.testing.assert_allclose(values, getattr(exact, name), rtol=1e-9, atol=1e-15)
+    assert run.part_x_m[1, 0] != 0.0  # at 40 N the part has moved by 0.1 s
+
+
 def test_exact_totals_agree_with_the_samples(case_study: FeederParameters) -> None:
     run = simulate(case_study, 2.0, 20_000.0)
     speed = (run.part_x_m[-1, 0] - run.part_x_m[0, 0]) / 2.0
