@@ -315,6 +315,7 @@ def _basis_all(tau, sigma, lam, root, r1, w, phi):
 # its basis by a shift from there, with Taylor series: exact to round-off (the first term left out
 # is below 1e-20), and no exponential or sine is evaluated
 SHIFT_RAD = 1e-3
+SHIFT_CHAIN = 3  # shifts in a row before a direct evaluation (round-off grows with each shift)
 
 
 @njit(cache=True, inline="always")
@@ -1834,17 +1835,20 @@ def _march_group(
                         # their basis is shifted from there
                         shift_max = SHIFT_RAD / max(abs(sigma) + root, w, 1e-300)
                         x_b = np.nan  # where the basis values were taken
+                        chain = 0
                         for _it in range(100):
                             tau = ts + x
-                            if abs(x - x_b) <= shift_max:
+                            if abs(x - x_b) <= shift_max and chain < SHIFT_CHAIN:
                                 cc, ss, sn, cs = _shift_basis(
                                     x - x_b, sigma, lam, w, cc, ss, sn, cs
                                 )
                                 bc, bs = _basis_bounds(tau, sigma, lam, root, r1)
+                                chain += 1
                             else:
                                 cc, ss, sn, cs, bc, bs = _basis_all(
                                     tau, sigma, lam, root, r1, w, phi
                                 )
+                                chain = 0
                             x_b = x
                             f = sg * _row(rows, fr, cc, ss, sn, cs) + c0 + c1 * x
                             d = sg * _row(rows, fr + 1, cc, ss, sn, cs) + c1
