@@ -112,7 +112,7 @@ def probe_node(name: str = "feeder_test_probe") -> Iterator[Node]:
 _clients: weakref.WeakKeyDictionary[Node, dict[tuple[Any, str], Any]] = weakref.WeakKeyDictionary()
 
 
-def call(node: Node, service_type: Any, name: str, request: Any, timeout_s: float = 10.0) -> Any:
+def call(node: Node, service_type: Any, name: str, request: Any, timeout_s: float = 30.0) -> Any:
     """Call a service from the test thread (the probe's executor thread delivers the answer)."""
     clients = _clients.setdefault(node, {})
     client = clients.get((service_type, name))

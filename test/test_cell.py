@@ -175,7 +175,7 @@ def test_cell_runs_feeders_side_by_side_and_leaves_no_orphans(tmp_path: Path, ho
             process.kill()  # the supervisor dies without cleaning up ...
             process.wait(timeout=10)
         # ... and still no node survives it
-        assert wait_until(lambda: not any(_alive(pid) for pid in children), 15.0)
+        assert wait_until(lambda: not any(_alive(pid) for pid in children), 30.0)
     finally:
         if process.poll() is None:
             process.kill()
