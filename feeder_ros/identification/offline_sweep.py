@@ -18,8 +18,8 @@ Choices, and why:
   ``track_length_m`` = :data:`ENDLESS_TRACK_M`, so no part leaves during a long window.
 * **Distance instead of a window** (the paper timed parts over 8.5 cm): the distance is measured
   along the track, as light barriers on the track see it (the live sweep's part sensors), and
-  timed from ``settle_s`` to the first instant the part's front has moved ``distance_m`` along
-  the track. One exact run per point
+  timed from ``settle_s`` to the first instant the part has moved ``distance_m`` along the
+  track. One exact run per point
   (:class:`~feeder_ros.physics.simulation.FeederSimulator`): at ``settle_s`` the track is cut
   (``set_parameters``) to end ``distance_m`` ahead of the part, and the engine locates the part's
   exit like any other event, exact to round-off. (A part advances in bursts, slip, with stands
