@@ -2,6 +2,7 @@
 
 from __future__ import annotations
 
+import faulthandler
 import sys
 from collections.abc import Callable, Sequence
 from typing import Any
@@ -13,6 +14,14 @@ from rclpy.executors import ExternalShutdownException, SingleThreadedExecutor
 from rclpy.node import Node
 
 from feeder_ros.physics.parameters import ParameterError
+
+#: seconds a node's teardown (node destroyed, context shut down) may take once its spin has
+#: stopped; past that the process ends with status 1 and every thread's stack on stderr. The DDS
+#: teardown can hang: a node stopped by SIGTERM when its cell supervisor was killed once spun for
+#: good in Fast DDS's ``DomainParticipant::set_listener`` (``rmw_destroy_node`` ->
+#: ``destroy_participant``), an orphan burning a core. faulthandler's watchdog is a C thread, so
+#: it fires even while that C call holds the GIL.
+TEARDOWN_LIMIT_S = 10.0
 
 
 class StopOnShutdown:
@@ -48,7 +57,8 @@ def run_node(make_node: Callable[[], Node], args: Sequence[str] | None = None) -
 
     rclpy's signal handlers turn SIGINT (Ctrl-C) and SIGTERM into a context shutdown, so a cell
     supervisor stopping the node gets the same orderly exit: node destroyed, context shut down,
-    exit status 0.
+    exit status 0. A teardown that takes longer than :data:`TEARDOWN_LIMIT_S` ends the process
+    with status 1 (stacks on stderr).
     """
     argv = list(sys.argv if args is None else args)
     try:
@@ -64,8 +74,11 @@ def run_node(make_node: Callable[[], Node], args: Sequence[str] | None = None) -
                 with StopOnShutdown(node.context):
                     executor.spin()
             finally:
+                faulthandler.dump_traceback_later(TEARDOWN_LIMIT_S, exit=True)
                 executor.remove_node(node)
                 node.destroy_node()
     except (KeyboardInterrupt, ExternalShutdownException):
         pass
+    finally:
+        faulthandler.cancel_dump_traceback_later()
     return 0
