@@ -612,6 +612,15 @@ class FeederSimulator:
         seg = self._drive.segments()
         self._state[_k.S_SEG] = seg.index_at(self.time_s)
         chunks: list[tuple[F64, I8, I64]] = []
+        # events already due: drive changes at the chunk's start, and a logged drive change
+        # exactly at its end (the kernel stops before it)
+        pending = list(self._pending_events)
+        k_end = seg.index_at(t_end)
+        if t_end > t_start and seg.start_s[k_end] == t_end and seg.logged[k_end]:
+            pending.append((t_end, int(EventKind.DRIVE_CHANGE), -1))
+        if pending:
+            pt, pk, pp = zip(*pending, strict=True)
+            chunks.append((np.array(pt), np.array(pk, np.int8), np.array(pp, np.int64)))
         if march:
             # carrier alone first (pieces recorded), then every group along it, in parallel;
             # the part arrays are column-major there (each group writes its own columns)
@@ -625,7 +634,9 @@ class FeederSimulator:
                 chunks,
                 record=True,
             )
-            self._run_groups(pieces, t_end, samples, out_cx, out_cv, out_px, out_pv, out_pp, chunks)
+            chunks = self._run_groups(
+                pieces, t_end, samples, out_cx, out_cv, out_px, out_pv, out_pp, chunks
+            )
             if self._g.has_duplicate_sticking():
                 self._regroup()  # parts of one friction that stick together share a future
         else:
@@ -638,14 +649,7 @@ class FeederSimulator:
                 chunks,
                 record=False,
             )
-        # a logged drive change exactly at the end of the chunk: the kernel stops before it
-        k_end = seg.index_at(t_end)
-        if t_end > t_start and seg.start_s[k_end] == t_end and seg.logged[k_end]:
-            self._pending_events.append((t_end, int(EventKind.DRIVE_CHANGE), -1))
-        if self._pending_events:
-            pt, pk, pp = zip(*self._pending_events, strict=True)
-            chunks.insert(0, (np.array(pt), np.array(pk, np.int8), np.array(pp, np.int64)))
-            self._pending_events = []
+        self._pending_events = []
         if len(chunks) == 1 and _k.check_samples(chunks[0][0]) == 0:
             # one chunk (fresh copies) already in time order: as it is
             event_t = chunks[0][0]
@@ -783,12 +787,21 @@ class FeederSimulator:
         out_px: F64,
         out_pv: F64,
         out_pp: I8,
-        chunks: list[tuple[F64, I8, I64]],
-    ) -> None:
-        """March every group along the recorded carrier pieces (one-way coupling), in parallel."""
+        earlier: list[tuple[F64, I8, I64]],
+    ) -> list[tuple[F64, I8, I64]]:
+        """March every group along the recorded carrier pieces (one-way coupling), in parallel.
+
+        Returns the run's events, one chunk per pass in time order, the chunks one after the
+        other: each pass's events with those of ``earlier`` (the drive's and the carrier's, in
+        input order before the groups') up to the pass's end."""
         g, m = self._g, self._m
         G = g.size
         track = float(self._model[_k.TRACK])
+        pre_t = np.concatenate([c[0] for c in earlier]) if earlier else np.zeros(0)
+        pre_kind = np.concatenate([c[1] for c in earlier]) if earlier else np.zeros(0, np.int8)
+        pre_part = np.concatenate([c[2] for c in earlier]) if earlier else np.zeros(0, np.int64)
+        pre_left = np.ones(pre_t.size, bool)
+        chunks: list[tuple[F64, I8, I64]] = []
         n_total = pieces.shape[0]
         for k0 in range(0, max(n_total, 1), self.pieces_per_pass):
             batch = np.ascontiguousarray(pieces[k0 : k0 + self.pieces_per_pass])
@@ -800,43 +813,49 @@ class FeederSimulator:
             members_before = m.group.copy()
             saved = (g.copy(), m.copy())
             cap = 16 + 4 * nb
-            while True:
-                ev_t = np.empty((G, cap))
-                ev_kind = np.empty((G, cap), np.int8)
-                ev_part = np.empty((G, cap), np.int64)
-                ev_n = np.zeros(G, np.int64)
-                status = np.full(G, -1, np.int64)
-                # small passes run on one thread: a parallel region costs more than it saves
-                # there (and OpenMP's spin-waiting is slow on a loaded machine)
-                threads = numba.get_num_threads()
-                if G * nb < SMALL_PARALLEL_WORK:
-                    numba.set_num_threads(1)
-                try:
+            # small passes run on one thread: a parallel region costs more than it saves
+            # there (and OpenMP's spin-waiting is slow on a loaded machine)
+            threads = numba.get_num_threads()
+            if G * nb < SMALL_PARALLEL_WORK:
+                numba.set_num_threads(1)
+            try:
+                while True:
+                    ev_t = np.empty((G, cap))
+                    ev_kind = np.empty((G, cap), np.int8)
+                    ev_part = np.empty((G, cap), np.int64)
+                    ev_n = np.zeros(G, np.int64)
+                    status = np.full(G, -1, np.int64)
                     _k.advance_groups(  # type: ignore[call-arg]
                         batch, nb, *tables, track, t_stop, samples, ns0, out_cx, out_cv,
                         g.L, g.D, g.mass, g.u, g.y, g.slip, g.lead, g.phase, g.head,
                         m.group, m.next, m.offset, m.mass, m.slip0, m.exit_t,
                         out_px, out_pv, out_pp, ev_t, ev_kind, ev_part, ev_n, status,
                     )  # fmt: skip
-                finally:
-                    numba.set_num_threads(threads)
-                if np.any(status[saved[0].head >= 0] == _k.STATUS_BUFFER_FULL):
-                    g.restore(saved[0])
-                    m.restore(saved[1])
-                    cap *= 2
-                    continue
-                bad = np.flatnonzero((status != _k.STATUS_DONE) & (status != -1))
-                if bad.size:
-                    raise SimulationError(
-                        f"sharp solver (groups {bad.tolist()}) stopped: an event repeats at "
-                        "one instant without progress"
-                    )
-                break
-            chunks.append(
-                _k.expand_group_events(ev_t, ev_kind, ev_part, ev_n, members_before, m.exit_t)
-            )
+                    if np.any(status[saved[0].head >= 0] == _k.STATUS_BUFFER_FULL):
+                        g.restore(saved[0])
+                        m.restore(saved[1])
+                        cap *= 2
+                        continue
+                    bad = np.flatnonzero((status != _k.STATUS_DONE) & (status != -1))
+                    if bad.size:
+                        raise SimulationError(
+                            f"sharp solver (groups {bad.tolist()}) stopped: an event repeats "
+                            "at one instant without progress"
+                        )
+                    break
+                # the earlier events up to the pass's end (ties at the end: before the groups')
+                take = pre_left.copy() if final else pre_left & (pre_t <= t_stop)
+                pre_left &= ~take
+                events = _k.group_events_in_time_order(
+                    pre_t[take], pre_kind[take], pre_part[take],
+                    ev_t, ev_kind, ev_part, ev_n, members_before, m.exit_t,
+                )  # fmt: skip
+                chunks.append(events)
+            finally:
+                numba.set_num_threads(threads)
             if final:
                 break
+        return chunks
 
     def _totals(self) -> dict[str, F64]:
         m, g = self._m, self._g

@@ -173,21 +173,70 @@ def test_shifted_basis_equals_the_direct_basis(sigma: float, lam: float) -> None
             assert abs(got - want) <= 1e-14 * scale, (tau, dt, got, want)
 
 
-def test_group_events_expand_to_the_members_present() -> None:
-    rng = np.random.default_rng(3)
-    G, N, cap = 5, 17, 9
+def _random_pass(seed: int, G: int, N: int, cap: int, clustered: bool) -> tuple[np.ndarray, ...]:
+    """Per-group event rows like a march pass's: each row in time order, group events (part -1)
+    and exits; ``clustered``: times on a coarse grid (many equal times across groups)."""
+    rng = np.random.default_rng(seed)
     before = rng.integers(-1, G, N)
     exit_t = np.where(rng.random(N) < 0.3, rng.uniform(0, 1, N), np.nan)
     ev_n = rng.integers(0, cap + 1, G)
-    ev_t = np.sort(rng.uniform(0, 1, (G, cap)), axis=1)
+    times = rng.uniform(0, 1, (G, cap))
+    if clustered:
+        times = np.round(times * 50.0) / 50.0
+    ev_t = np.sort(times, axis=1)
     ev_kind = rng.integers(0, 6, (G, cap)).astype(np.int8)
     ev_part = np.where(rng.random((G, cap)) < 0.2, rng.integers(0, N, (G, cap)), -1)
-    t, kind, part = k.expand_group_events(ev_t, ev_kind, ev_part, ev_n, before, exit_t)
+    pre_t = np.round(rng.uniform(0, 1, 40) * 50.0) / 50.0  # ties with the groups' events
+    pre_kind = rng.integers(0, 8, 40).astype(np.int8)
+    pre_part = rng.integers(-1, N, 40)
+    return pre_t, pre_kind, pre_part, ev_t, ev_kind, ev_part, ev_n, before, exit_t
+
+
+@pytest.mark.parametrize(
+    ("G", "N", "cap", "clustered"),
+    [
+        (5, 17, 9, False),  # below the bucket sort's size: one stable sort
+        (5, 17, 9, True),
+        (300, 700, 40, False),  # thousands of events: time buckets sorted in parallel
+        (300, 700, 40, True),  # long runs of equal times, across groups and the earlier events
+    ],
+)
+def test_group_events_go_to_the_members_present_in_stable_time_order(
+    G: int, N: int, cap: int, clustered: bool
+) -> None:
+    pre_t, pre_kind, pre_part, ev_t, ev_kind, ev_part, ev_n, before, exit_t = _random_pass(
+        G, G, N, cap, clustered
+    )
+    t, kind, part = k.group_events_in_time_order(
+        pre_t, pre_kind, pre_part, ev_t, ev_kind, ev_part, ev_n, before, exit_t
+    )
     rt, rk, rp = _expand_reference(ev_t, ev_kind, ev_part, ev_n, before, exit_t)
-    assert t.tolist() == rt
-    assert kind.tolist() == rk
-    assert part.tolist() == rp
-    assert len(rp) > 20
+    want_t = np.concatenate([pre_t, rt])
+    order = np.argsort(want_t, kind="stable")
+    assert t.tolist() == want_t[order].tolist()
+    assert kind.tolist() == np.concatenate([pre_kind, rk])[order].tolist()
+    assert part.tolist() == np.concatenate([pre_part, rp])[order].tolist()
+    assert len(rp) > 2 * G
+    if G > 100:
+        assert t.size >= k.SORT_SERIAL_BELOW  # the bucket path ran
+    assert (t.dtype, kind.dtype, part.dtype) == (np.float64, np.int8, np.int64)
+
+
+def test_group_events_with_a_non_finite_time_get_a_plain_stable_sort() -> None:
+    pre_t, pre_kind, pre_part, ev_t, ev_kind, ev_part, ev_n, before, exit_t = _random_pass(
+        4, 300, 700, 40, True
+    )
+    pre_t[3] = np.inf  # no bucket holds it; it sorts last, like argsort's
+    t, kind, part = k.group_events_in_time_order(
+        pre_t, pre_kind, pre_part, ev_t, ev_kind, ev_part, ev_n, before, exit_t
+    )
+    rt, rk, rp = _expand_reference(ev_t, ev_kind, ev_part, ev_n, before, exit_t)
+    want_t = np.concatenate([pre_t, rt])
+    order = np.argsort(want_t, kind="stable")
+    assert t.tolist() == want_t[order].tolist()
+    assert kind.tolist() == np.concatenate([pre_kind, rk])[order].tolist()
+    assert part.tolist() == np.concatenate([pre_part, rp])[order].tolist()
+    assert (t[-1], part[-1]) == (np.inf, pre_part[3])
 
 
 @pytest.mark.parametrize(
