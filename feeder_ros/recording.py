@@ -14,6 +14,7 @@ in every case the bag is closed and its ``metadata.yaml`` final.
 
 from __future__ import annotations
 
+import faulthandler
 import importlib
 import time
 from collections.abc import Callable, Sequence
@@ -37,6 +38,7 @@ from rclpy.topic_endpoint_info import TopicEndpointInfo
 
 from feeder_ros.bag import BagWriter
 from feeder_ros.bag.errors import BagError
+from feeder_ros.nodes import runner
 from feeder_ros.nodes.runner import StopOnShutdown
 
 __all__ = [
@@ -225,8 +227,10 @@ def record(
     args: Sequence[str] | None = None,
     on_ready: Callable[[], None] | None = None,
 ) -> RecordingSummary:
-    """Record until Ctrl-C, SIGTERM or ``options.duration_s``; the bag is closed in every case.
-    Raises ``BagError`` if the bag cannot be created (e.g. the output directory exists)."""
+    """Record until Ctrl-C, SIGTERM or ``options.duration_s``; the bag is closed in every case,
+    before the middleware's teardown (a teardown that hangs ends the process after
+    ``runner.TEARDOWN_LIMIT_S`` with status 1, the bag complete). Raises ``BagError`` if the bag
+    cannot be created (e.g. the output directory exists)."""
     writer = BagWriter(
         options.output,
         compression=options.compression,
@@ -259,10 +263,18 @@ def record(
                     summary.stopped_by = "signal"
             finally:
                 executor.remove_node(node)
-                node.destroy_node()
+                try:
+                    # no callback writes once the loop has stopped: the bag is complete before
+                    # the middleware's teardown, which the watchdog bounds (a Fast DDS teardown
+                    # once spun for good; see runner.TEARDOWN_LIMIT_S)
+                    writer.close()
+                finally:
+                    faulthandler.dump_traceback_later(runner.TEARDOWN_LIMIT_S, exit=True)
+                    node.destroy_node()
     except (KeyboardInterrupt, ExternalShutdownException):
         summary.stopped_by = "signal"
     finally:
+        faulthandler.cancel_dump_traceback_later()
         writer.close()
     summary.files = writer.files
     return summary

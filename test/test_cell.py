@@ -206,6 +206,54 @@ def test_composed_cell_runs_every_node_in_one_process(tmp_path: Path) -> None:
             process.kill()
 
 
+COMPOSED_CELL_WITH_A_STUCK_TEARDOWN = """
+import sys
+
+import numpy as np
+from numba import njit
+
+from feeder_ros.cli.main import main
+from feeder_ros.nodes import manual_drive, runner
+
+runner.TEARDOWN_LIMIT_S = 3.0
+
+
+@njit
+def spin(a):  # holds the GIL, like a C call stuck in the DDS teardown
+    k = 0
+    while a[0] >= 0.0:  # never ends: a[0] only grows
+        a[k % 4] += 1.0
+        k += 1
+    return k
+
+
+spin(np.array([-1.0, 0.0, 0.0, 0.0]))  # compiled before the cell starts
+
+
+def stuck(self):
+    spin(np.zeros(4))
+
+
+manual_drive.NODE_CLASS.destroy_node = stuck
+sys.exit(main(["cell", "--composed", "--config", sys.argv[1], "--duration", "3"]))
+"""
+
+
+def test_a_composed_cell_whose_teardown_hangs_still_ends(tmp_path: Path) -> None:
+    script = tmp_path / "stuck_cell.py"
+    script.write_text(COMPOSED_CELL_WITH_A_STUCK_TEARDOWN)
+    result = subprocess.run(
+        [sys.executable, str(script), str(_two_feeders(tmp_path))],
+        capture_output=True,
+        text=True,
+        timeout=120,  # without the watchdog: never ends
+    )
+    assert result.returncode == 1, result.stdout + result.stderr
+    assert "[cell] composing /side/feeder_b/manual_drive" in result.stdout
+    assert "Timeout (0:00:03)!" in result.stderr
+    assert "in stuck" in result.stderr  # the stuck call, named on stderr
+
+
 def test_cell_refuses_a_bad_description_before_starting_anything(tmp_path: Path) -> None:
     bad = _write(tmp_path / "bad.yaml", {"feeders": [{"namespace": "/a", "nodes": {"x": {}}}]})
     result = subprocess.run(

@@ -306,3 +306,63 @@ def test_record_refuses_an_existing_bag(tmp_path: Path) -> None:
         "directory"
     ]
     assert sorted(p.name for p in existing.iterdir()) == ["keep.txt"]
+
+
+RECORDER_WITH_A_STUCK_TEARDOWN = """
+import sys
+from pathlib import Path
+
+import numpy as np
+from numba import njit
+
+from feeder_ros import recording
+from feeder_ros.nodes import runner
+
+runner.TEARDOWN_LIMIT_S = 3.0
+
+
+@njit
+def spin(a):  # holds the GIL, like a C call stuck in the DDS teardown
+    k = 0
+    while a[0] >= 0.0:  # never ends: a[0] only grows
+        a[k % 4] += 1.0
+        k += 1
+    return k
+
+
+spin(np.array([-1.0, 0.0, 0.0, 0.0]))  # compiled before the recording
+
+
+def stuck(self):
+    spin(np.zeros(4))
+
+
+recording.TopicRecorder.destroy_node = stuck
+options = recording.RecordingOptions(
+    output=Path(sys.argv[1]), namespace=sys.argv[2], duration_s=float(sys.argv[3])
+)
+recording.record(options)
+"""
+
+
+def test_a_recorder_whose_teardown_hangs_ends_with_its_bag_complete(tmp_path: Path) -> None:
+    ns = "/rec_stuck_teardown"
+    script = tmp_path / "stuck_recorder.py"
+    script.write_text(RECORDER_WITH_A_STUCK_TEARDOWN)
+    bag = tmp_path / "stuck"
+    with simulator(ns):
+        result = subprocess.run(
+            [sys.executable, str(script), str(bag), ns, "6"],
+            capture_output=True, text=True, timeout=120,  # without the watchdog: never ends
+        )  # fmt: skip
+    assert result.returncode == 1, result.stderr
+    assert "Timeout (0:00:03)!" in result.stderr
+    assert "in stuck" in result.stderr  # the stuck call, named on stderr
+    info = bag_info(Bag(bag))  # closed before the teardown: footer, summary, metadata.yaml
+    assert not info.cut_short
+    assert info.problems == []
+    assert info.topics[f"{ns}/carrier/state"].message_count > 100
+    meta = yaml.safe_load((bag / "metadata.yaml").read_text())
+    assert meta["rosbag2_bagfile_information"]["message_count"] == info.message_count
+    with RosbagsReader(bag) as reader:
+        assert reader.message_count == info.message_count

@@ -9,6 +9,7 @@ from __future__ import annotations
 
 import argparse
 import ctypes
+import faulthandler
 import os
 import shutil
 import signal
@@ -144,6 +145,8 @@ def run_composed(cell: CellDescription, parameters_file: Path, duration: float |
         # rclpy's handler shuts the context down, then chains to Python's (KeyboardInterrupt),
         # which can land anywhere in the shutdown: the cell is stopping either way
         pass
+    finally:
+        faulthandler.cancel_dump_traceback_later()  # armed for the nodes' teardown
     print("[cell] stopped", flush=True)
     return 0
 
@@ -152,6 +155,8 @@ def _spin_composed(
     cell: CellDescription, classes: dict[str, Any], parameters_file: Path, duration: float | None
 ) -> None:
     from rclpy.executors import MultiThreadedExecutor
+
+    from feeder_ros.nodes import runner
 
     executor = MultiThreadedExecutor(num_threads=max(2, len(cell.nodes)))
     nodes = []
@@ -168,6 +173,8 @@ def _spin_composed(
         # wait for callbacks in flight and end the executor's worker threads (left running, they
         # are joined at interpreter exit, and one stuck in a callback kept the process alive)
         executor.shutdown(timeout_sec=5.0)
+        # the nodes' and the context's teardown in the middleware is bounded as a node's is
+        faulthandler.dump_traceback_later(runner.TEARDOWN_LIMIT_S, exit=True)
         for node in nodes:
             executor.remove_node(node)
             node.destroy_node()
