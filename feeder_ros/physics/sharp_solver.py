@@ -2163,7 +2163,7 @@ def advance_groups(
         )
 
 
-SORT_CHUNKS = 2  # parallel shares of the event sorts (input chunks, or bucket ranges)
+SORT_CHUNKS = 2  # parallel shares (bucket ranges) of group_events_in_time_order
 SORT_SERIAL_BELOW = 4096  # fewer events are sorted by a plain stable argsort
 
 
@@ -2318,7 +2318,7 @@ def _fill_events_in_time_order(
             out_t, out_kind, out_part, total,
         )  # fmt: skip
         return total
-    nb = total // 2 + 1  # as _bucket_order
+    nb = total // 2 + 1  # measured best (n and 2n no better): events cluster in time
     scale = nb / (hi - lo)
     C = SORT_CHUNKS
     pos = counts[:nb]
@@ -2403,91 +2403,14 @@ def _sort_events(t, kind, part, s, e):
 
 @njit(cache=True)
 def stable_time_order(t):
-    """``np.argsort(t, kind="stable")`` for event times (finite), in linear expected time.
-
-    Serial itself: a few events (a live simulator's tick) never start a parallel region, whose
-    worker threads would then spin on the other cores for a while (a whole second core at a
-    1 kHz tick). Many unordered events go to :func:`_bucket_order`."""
+    """``np.argsort(t, kind="stable")`` for event times: ``arange`` for times already in order
+    (one pass), else a stable sort. Serial: a few events (a live simulator's tick) never start a
+    parallel region, whose worker threads would then spin on the other cores for a while (a
+    whole second core at a 1 kHz tick). The chunks of a run come in order, but for a drive change
+    at the end of the run logged first; the group march's many events are put in order by
+    :func:`group_events_in_time_order`."""
     n = t.shape[0]
-    if n == 0:
-        return np.zeros(0, np.int64)
-    lo = t[0]
-    hi = t[0]
-    ordered = True
-    for i in range(n):
-        if not math.isfinite(t[i]):
+    for i in range(1, n):
+        if not t[i - 1] <= t[i]:  # out of order, or not finite
             return np.argsort(t, kind="mergesort")
-        if i > 0 and t[i] < t[i - 1]:
-            ordered = False
-        lo = min(lo, t[i])
-        hi = max(hi, t[i])
-    if ordered:
-        return np.arange(n)
-    if n < SORT_SERIAL_BELOW:
-        return np.argsort(t, kind="mergesort")
-    return _bucket_order(t, lo, hi)
-
-
-@njit(cache=True, parallel=True)
-def _bucket_order(t, lo, hi):
-    """The stable order of many finite times in ``[lo, hi]`` (``lo < hi``): the times are spread
-    over buckets (chunks of the input in parallel, each chunk's elements after the previous
-    chunk's in a bucket), then the buckets are sorted stably, in parallel."""
-    n = t.shape[0]
-    nb = n // 2 + 1  # measured best: event times cluster at phases of the carrier cycle
-    scale = nb / (hi - lo)
-    C = SORT_CHUNKS
-    bucket = np.empty(n, np.int64)
-    count = np.zeros((C, nb), np.int64)
-    for c in prange(C):
-        for i in range(c * n // C, (c + 1) * n // C):
-            b = min(int((t[i] - lo) * scale), nb - 1)
-            bucket[i] = b
-            count[c, b] += 1
-    start = np.empty(nb + 1, np.int64)
-    q = 0
-    for b in range(nb):
-        start[b] = q
-        for c in range(C):
-            m = count[c, b]
-            count[c, b] = q  # where chunk c's elements of bucket b go
-            q += m
-    start[nb] = n
-    order = np.empty(n, np.int64)
-    key = np.empty(n)  # the times in bucket order, sorted in place with the order
-    for c in prange(C):
-        for i in range(c * n // C, (c + 1) * n // C):
-            b = bucket[i]
-            q = count[c, b]
-            order[q] = i
-            key[q] = t[i]
-            count[c, b] = q + 1
-    for c in prange(C):
-        for b in range(c * nb // C, (c + 1) * nb // C):
-            _sort_bucket(order, key, start[b], start[b + 1])
-    return order
-
-
-@njit(cache=True)
-def _sort_bucket(order, key, s, e):
-    """Stable sort of ``order[s:e]`` by ``key[s:e]`` (both permuted in place)."""
-    for j in range(s + 1, e):
-        if key[j] < key[j - 1]:
-            break
-    else:
-        return
-    if e - s > 32:
-        idx = np.argsort(key[s:e], kind="mergesort")
-        order[s:e] = order[s:e][idx]
-        key[s:e] = key[s:e][idx]
-        return
-    for j in range(s + 1, e):
-        cur = order[j]
-        tc = key[j]
-        q = j - 1
-        while q >= s and key[q] > tc:
-            order[q + 1] = order[q]
-            key[q + 1] = key[q]
-            q -= 1
-        order[q + 1] = cur
-        key[q + 1] = tc
+    return np.arange(n)

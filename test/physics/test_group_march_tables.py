@@ -192,6 +192,25 @@ def _random_pass(seed: int, G: int, N: int, cap: int, clustered: bool) -> tuple[
     return pre_t, pre_kind, pre_part, ev_t, ev_kind, ev_part, ev_n, before, exit_t
 
 
+def _sorted_and_expected(
+    args: tuple[np.ndarray, ...],
+) -> tuple[tuple[list[float], list[int], list[int]], tuple[list[float], list[int], list[int]]]:
+    """The kernel's events for a pass, and the reference: the earlier events, then the
+    expansion of the groups' rows, sorted stably by time."""
+    pre_t, pre_kind, pre_part, ev_t, ev_kind, ev_part, ev_n, before, exit_t = args
+    t, kind, part = k.group_events_in_time_order(*args)
+    assert (t.dtype, kind.dtype, part.dtype) == (np.float64, np.int8, np.int64)
+    rt, rk, rp = _expand_reference(ev_t, ev_kind, ev_part, ev_n, before, exit_t)
+    want_t = np.concatenate([pre_t, rt])
+    order = np.argsort(want_t, kind="stable")
+    want = (
+        want_t[order].tolist(),
+        np.concatenate([pre_kind, rk])[order].tolist(),
+        np.concatenate([pre_part, rp])[order].tolist(),
+    )
+    return (t.tolist(), kind.tolist(), part.tolist()), want
+
+
 @pytest.mark.parametrize(
     ("G", "N", "cap", "clustered"),
     [
@@ -204,52 +223,33 @@ def _random_pass(seed: int, G: int, N: int, cap: int, clustered: bool) -> tuple[
 def test_group_events_go_to_the_members_present_in_stable_time_order(
     G: int, N: int, cap: int, clustered: bool
 ) -> None:
-    pre_t, pre_kind, pre_part, ev_t, ev_kind, ev_part, ev_n, before, exit_t = _random_pass(
-        G, G, N, cap, clustered
-    )
-    t, kind, part = k.group_events_in_time_order(
-        pre_t, pre_kind, pre_part, ev_t, ev_kind, ev_part, ev_n, before, exit_t
-    )
-    rt, rk, rp = _expand_reference(ev_t, ev_kind, ev_part, ev_n, before, exit_t)
-    want_t = np.concatenate([pre_t, rt])
-    order = np.argsort(want_t, kind="stable")
-    assert t.tolist() == want_t[order].tolist()
-    assert kind.tolist() == np.concatenate([pre_kind, rk])[order].tolist()
-    assert part.tolist() == np.concatenate([pre_part, rp])[order].tolist()
-    assert len(rp) > 2 * G
+    got, want = _sorted_and_expected(_random_pass(G, G, N, cap, clustered))
+    assert got == want
+    assert len(want[0]) > 40 + 2 * G  # the earlier events and many of the groups'
     if G > 100:
-        assert t.size >= k.SORT_SERIAL_BELOW  # the bucket path ran
-    assert (t.dtype, kind.dtype, part.dtype) == (np.float64, np.int8, np.int64)
+        assert len(got[0]) >= k.SORT_SERIAL_BELOW  # the bucket path ran
 
 
 def test_group_events_with_a_non_finite_time_get_a_plain_stable_sort() -> None:
-    pre_t, pre_kind, pre_part, ev_t, ev_kind, ev_part, ev_n, before, exit_t = _random_pass(
-        4, 300, 700, 40, True
-    )
-    pre_t[3] = np.inf  # no bucket holds it; it sorts last, like argsort's
-    t, kind, part = k.group_events_in_time_order(
-        pre_t, pre_kind, pre_part, ev_t, ev_kind, ev_part, ev_n, before, exit_t
-    )
-    rt, rk, rp = _expand_reference(ev_t, ev_kind, ev_part, ev_n, before, exit_t)
-    want_t = np.concatenate([pre_t, rt])
-    order = np.argsort(want_t, kind="stable")
-    assert t.tolist() == want_t[order].tolist()
-    assert kind.tolist() == np.concatenate([pre_kind, rk])[order].tolist()
-    assert part.tolist() == np.concatenate([pre_part, rp])[order].tolist()
-    assert (t[-1], part[-1]) == (np.inf, pre_part[3])
+    args = _random_pass(4, 300, 700, 40, True)
+    args[0][3] = np.inf  # an earlier event; no bucket holds it, it sorts last, like argsort's
+    got, want = _sorted_and_expected(args)
+    assert got == want
+    assert (got[0][-1], got[2][-1]) == (np.inf, args[2][3])
 
 
 @pytest.mark.parametrize(
     "times",
     [
         np.random.default_rng(1).uniform(0, 10, 5000),
-        np.random.default_rng(6).uniform(0, 10, 300),  # below the parallel bucket sort's size
+        np.random.default_rng(6).uniform(0, 10, 300),
         np.repeat(np.random.default_rng(2).uniform(0, 1, 40), 300),  # long runs of equal times
         np.concatenate([np.full(100, 3.0), np.linspace(0, 1, 50), np.full(7, 3.0)]),
         np.round(np.random.default_rng(4).normal(0, 1e-3, 3000), 5) + 2.0,  # clustered
         np.full(10, 1.5),
         np.array([2.0]),
         np.zeros(0),
+        np.arange(20.0),  # in order already
     ],
 )
 def test_stable_time_order_equals_a_stable_argsort(times: np.ndarray) -> None:
@@ -261,12 +261,12 @@ def test_stable_time_order_falls_back_on_non_finite_times() -> None:
     assert np.array_equal(k.stable_time_order(times), np.argsort(times, kind="stable"))
 
 
-def test_stable_time_order_starts_no_parallel_region_for_few_events() -> None:
+def test_only_the_group_event_sort_starts_a_parallel_region() -> None:
     # a parallel region leaves the thread pool's workers spinning on the other cores for a while
-    # (a whole second core for a live simulator ticking at 1 kHz): only the bucket sort of many
-    # unordered events is parallel
+    # (a whole second core for a live simulator ticking at 1 kHz): the sort of a run's few
+    # chunks is serial; only the group march's events (many) are sorted in parallel
     assert not k.stable_time_order.targetoptions.get("parallel")
-    assert k._bucket_order.targetoptions.get("parallel")
+    assert k._fill_events_in_time_order.targetoptions.get("parallel")
 
 
 def _shared_friction_parts() -> list[PartSpec]:
