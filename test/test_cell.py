@@ -11,6 +11,7 @@ from pathlib import Path
 import pytest
 import yaml
 from ros_test_tools import probe_node, wait_until
+from stuck_code import STUCK_SPIN_SOURCE
 
 from feeder_ros.cell import CellError, load_cell, parameters_document
 from feeder_ros.cli.cell import node_executables
@@ -206,28 +207,15 @@ def test_composed_cell_runs_every_node_in_one_process(tmp_path: Path) -> None:
             process.kill()
 
 
-COMPOSED_CELL_WITH_A_STUCK_TEARDOWN = """
+COMPOSED_CELL_WITH_A_STUCK_TEARDOWN = (
+    STUCK_SPIN_SOURCE
+    + """
 import sys
-
-import numpy as np
-from numba import njit
 
 from feeder_ros.cli.main import main
 from feeder_ros.nodes import manual_drive, runner
 
 runner.TEARDOWN_LIMIT_S = 3.0
-
-
-@njit
-def spin(a):  # holds the GIL, like a C call stuck in the DDS teardown
-    k = 0
-    while a[0] >= 0.0:  # never ends: a[0] only grows
-        a[k % 4] += 1.0
-        k += 1
-    return k
-
-
-spin(np.array([-1.0, 0.0, 0.0, 0.0]))  # compiled before the cell starts
 
 
 def stuck(self):
@@ -237,6 +225,7 @@ def stuck(self):
 manual_drive.NODE_CLASS.destroy_node = stuck
 sys.exit(main(["cell", "--composed", "--config", sys.argv[1], "--duration", "3"]))
 """
+)
 
 
 def test_a_composed_cell_whose_teardown_hangs_still_ends(tmp_path: Path) -> None:

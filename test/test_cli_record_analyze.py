@@ -29,6 +29,7 @@ from rclpy.qos import QoSProfile, ReliabilityPolicy
 from rclpy.serialization import deserialize_message
 from ros_test_tools import probe_node, running, wait_until
 from rosbags.rosbag2 import Reader as RosbagsReader
+from stuck_code import STUCK_SPIN_SOURCE
 
 from feeder_ros.bag import Bag, BagWarning, bag_info
 from feeder_ros.msg import CarrierState, DriveCommand, PartStateArray
@@ -308,29 +309,16 @@ def test_record_refuses_an_existing_bag(tmp_path: Path) -> None:
     assert sorted(p.name for p in existing.iterdir()) == ["keep.txt"]
 
 
-RECORDER_WITH_A_STUCK_TEARDOWN = """
+RECORDER_WITH_A_STUCK_TEARDOWN = (
+    STUCK_SPIN_SOURCE
+    + """
 import sys
 from pathlib import Path
-
-import numpy as np
-from numba import njit
 
 from feeder_ros import recording
 from feeder_ros.nodes import runner
 
 runner.TEARDOWN_LIMIT_S = 3.0
-
-
-@njit
-def spin(a):  # holds the GIL, like a C call stuck in the DDS teardown
-    k = 0
-    while a[0] >= 0.0:  # never ends: a[0] only grows
-        a[k % 4] += 1.0
-        k += 1
-    return k
-
-
-spin(np.array([-1.0, 0.0, 0.0, 0.0]))  # compiled before the recording
 
 
 def stuck(self):
@@ -343,6 +331,7 @@ options = recording.RecordingOptions(
 )
 recording.record(options)
 """
+)
 
 
 def test_a_recorder_whose_teardown_hangs_ends_with_its_bag_complete(tmp_path: Path) -> None:

@@ -10,22 +10,13 @@ import time
 from pathlib import Path
 
 import hard_timeout
+from stuck_code import STUCK_SPIN_SOURCE
 
 TEST_DIR = Path(__file__).resolve().parent
 
-STUCK = """
-import numpy as np
-from numba import njit
-
-
-@njit
-def spin(a):
-    k = 0
-    while a[0] >= 0.0:  # never ends: a[0] only grows
-        a[k % 4] += 1.0
-        k += 1
-    return k
-
+STUCK = (
+    STUCK_SPIN_SOURCE
+    + """
 
 def test_fine():
     assert spin(np.array([-1.0, 0.0, 0.0, 0.0])) == 0
@@ -34,6 +25,7 @@ def test_fine():
 def test_stuck():
     spin(np.zeros(4))
 """
+)
 
 
 def _run(tmp_path: Path, limit: str) -> tuple[subprocess.CompletedProcess[str], Path, float]:

@@ -8,11 +8,13 @@ import sys
 import textwrap
 from pathlib import Path
 
-NODE = """
+from stuck_code import STUCK_SPIN_SOURCE
+
+NODE = (
+    STUCK_SPIN_SOURCE
+    + """
 import sys
 
-import numpy as np
-from numba import njit
 from rclpy.node import Node
 
 from feeder_ros.nodes import runner
@@ -21,19 +23,9 @@ runner.TEARDOWN_LIMIT_S = 3.0
 HANG = sys.argv[1] == "hang"
 
 
-@njit
-def spin(a):  # holds the GIL, like a C call stuck in the DDS teardown
-    k = 0
-    while a[0] >= 0.0:  # never ends: a[0] only grows
-        a[k % 4] += 1.0
-        k += 1
-    return k
-
-
 class Teardown(Node):
     def __init__(self) -> None:
         super().__init__("teardown_probe")
-        spin(np.array([-1.0, 0.0, 0.0, 0.0]))  # compiled before the stop
         self.create_timer(0.05, lambda: print("spinning", flush=True))
 
     def destroy_node(self) -> None:
@@ -44,6 +36,7 @@ class Teardown(Node):
 
 sys.exit(runner.run_node(Teardown, ["teardown_probe"]))
 """
+)
 
 
 def _stop_with_sigterm(tmp_path: Path, mode: str) -> tuple[int, str]:
