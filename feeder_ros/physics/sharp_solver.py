@@ -2251,7 +2251,7 @@ def group_events_in_time_order(
     order), as ``np.argsort(t, kind="stable")`` would.
 
     Plain Python around :func:`_fill_events_in_time_order`: the output and the kernel's bucket
-    counts are allocated by numpy, which asks the kernel for huge pages on large arrays (numba's
+    counts are allocated by numpy, which asks Linux for huge pages on large arrays (numba's
     own allocations fault in every 4 kB page, about 1 us each here).
     """
     G = ev_t.shape[0]
