@@ -657,10 +657,15 @@ class FeederSimulator:
             event_part = chunks[0][2].astype(np.int64, copy=False)
         else:
             event_t = np.concatenate([c[0] for c in chunks])
-            order = _k.stable_time_order(event_t)
-            event_t = event_t[order]
-            event_kind = np.concatenate([c[1] for c in chunks]).astype(np.int8)[order]
-            event_part = np.concatenate([c[2] for c in chunks]).astype(np.int64)[order]
+            event_kind = np.concatenate([c[1] for c in chunks]).astype(np.int8, copy=False)
+            event_part = np.concatenate([c[2] for c in chunks]).astype(np.int64, copy=False)
+            if _k.check_samples(event_t) != 0:
+                # out of order (a drive change at the chunk's end comes first) or not finite; the
+                # group march's passes come in order one after the other and need no sort
+                order = _k.stable_time_order(event_t)
+                event_t = event_t[order]
+                event_kind = event_kind[order]
+                event_part = event_part[order]
         return SimulationResult(
             t_s=samples,
             carrier_x_m=out_cx,
