@@ -20,3 +20,29 @@ def spin(a):
 
 spin(np.array([-1.0, 0.0, 0.0, 0.0]))
 """
+
+#: What a script of :func:`stuck_teardown_script` prints on stderr when its watchdog fires.
+TEARDOWN_TIMEOUT_TEXT = "Timeout (0:00:03)!"
+
+
+def stuck_teardown_script(patch_and_run: str) -> str:
+    """A script running a feeder entry point whose middleware teardown gets stuck for good.
+
+    The script defines ``stuck(self)`` (spins, holding the GIL) and sets the teardown limit to
+    3 s; ``patch_and_run`` puts ``stuck`` in place of a ``destroy_node`` and runs the entry point
+    (``sys`` is imported).
+    """
+    prelude = """
+import sys
+
+from feeder_ros.nodes import runner
+
+runner.TEARDOWN_LIMIT_S = 3.0
+
+
+def stuck(self):
+    spin(np.zeros(4))
+
+
+"""
+    return STUCK_SPIN_SOURCE + prelude + patch_and_run

@@ -11,7 +11,7 @@ from pathlib import Path
 import pytest
 import yaml
 from ros_test_tools import probe_node, wait_until
-from stuck_code import STUCK_SPIN_SOURCE
+from stuck_code import TEARDOWN_TIMEOUT_TEXT, stuck_teardown_script
 
 from feeder_ros.cell import CellError, load_cell, parameters_document
 from feeder_ros.cli.cell import node_executables
@@ -207,20 +207,10 @@ def test_composed_cell_runs_every_node_in_one_process(tmp_path: Path) -> None:
             process.kill()
 
 
-COMPOSED_CELL_WITH_A_STUCK_TEARDOWN = (
-    STUCK_SPIN_SOURCE
-    + """
-import sys
-
+COMPOSED_CELL_WITH_A_STUCK_TEARDOWN = stuck_teardown_script(
+    """
 from feeder_ros.cli.main import main
-from feeder_ros.nodes import manual_drive, runner
-
-runner.TEARDOWN_LIMIT_S = 3.0
-
-
-def stuck(self):
-    spin(np.zeros(4))
-
+from feeder_ros.nodes import manual_drive
 
 manual_drive.NODE_CLASS.destroy_node = stuck
 sys.exit(main(["cell", "--composed", "--config", sys.argv[1], "--duration", "3"]))
@@ -239,7 +229,7 @@ def test_a_composed_cell_whose_teardown_hangs_still_ends(tmp_path: Path) -> None
     )
     assert result.returncode == 1, result.stdout + result.stderr
     assert "[cell] composing /side/feeder_b/manual_drive" in result.stdout
-    assert "Timeout (0:00:03)!" in result.stderr
+    assert TEARDOWN_TIMEOUT_TEXT in result.stderr
     assert "in stuck" in result.stderr  # the stuck call, named on stderr
 
 

@@ -29,7 +29,7 @@ from rclpy.qos import QoSProfile, ReliabilityPolicy
 from rclpy.serialization import deserialize_message
 from ros_test_tools import probe_node, running, wait_until
 from rosbags.rosbag2 import Reader as RosbagsReader
-from stuck_code import STUCK_SPIN_SOURCE
+from stuck_code import TEARDOWN_TIMEOUT_TEXT, stuck_teardown_script
 
 from feeder_ros.bag import Bag, BagWarning, bag_info
 from feeder_ros.msg import CarrierState, DriveCommand, PartStateArray
@@ -309,21 +309,11 @@ def test_record_refuses_an_existing_bag(tmp_path: Path) -> None:
     assert sorted(p.name for p in existing.iterdir()) == ["keep.txt"]
 
 
-RECORDER_WITH_A_STUCK_TEARDOWN = (
-    STUCK_SPIN_SOURCE
-    + """
-import sys
+RECORDER_WITH_A_STUCK_TEARDOWN = stuck_teardown_script(
+    """
 from pathlib import Path
 
 from feeder_ros import recording
-from feeder_ros.nodes import runner
-
-runner.TEARDOWN_LIMIT_S = 3.0
-
-
-def stuck(self):
-    spin(np.zeros(4))
-
 
 recording.TopicRecorder.destroy_node = stuck
 options = recording.RecordingOptions(
@@ -345,7 +335,7 @@ def test_a_recorder_whose_teardown_hangs_ends_with_its_bag_complete(tmp_path: Pa
             capture_output=True, text=True, timeout=120,  # without the watchdog: never ends
         )  # fmt: skip
     assert result.returncode == 1, result.stderr
-    assert "Timeout (0:00:03)!" in result.stderr
+    assert TEARDOWN_TIMEOUT_TEXT in result.stderr
     assert "in stuck" in result.stderr  # the stuck call, named on stderr
     info = bag_info(Bag(bag))  # closed before the teardown: footer, summary, metadata.yaml
     assert not info.cut_short
