@@ -34,7 +34,13 @@ from feeder_ros.cli.main import CommandError
 from feeder_ros.cli.progress import ProgressBar
 from feeder_ros.cli.sim import add_plant_arguments, default_config_path, plant_from_arguments
 from feeder_ros.identification.group_fit import DEFAULT_FOLDS, FitSettings, GroupFit, fit_group
-from feeder_ros.identification.report import fit_json, summary, write_model_file, write_outputs
+from feeder_ros.identification.report import (
+    fit_json,
+    summary,
+    write_model_file,
+    write_outputs,
+    write_points,
+)
 from feeder_ros.identification.sweep import (
     SweepPlan,
     SweepPlanError,
@@ -244,6 +250,14 @@ def _sweep_live(args: argparse.Namespace, plan: SweepPlan, show: bool) -> SweepR
             f"--source live needs ROS 2 (rclpy) and the built interfaces: {error}"
         ) from None
     bar = ProgressBar("sweeping (live)", plan.point_count, show)
+
+    def save(result: SweepResult) -> None:
+        # before the client's teardown, which can hang in the middleware (then the process ends
+        # with status 1 and these points are what is left of the sweep)
+        if args.output is not None:
+            path = write_points(args.output, result)
+            _note(f"measured points saved to {path}", bar)
+
     try:
         return run_live_sweep(
             plan,
@@ -253,6 +267,7 @@ def _sweep_live(args: argparse.Namespace, plan: SweepPlan, show: bool) -> SweepR
             progress=lambda done, total: bar.update(done),
             log=lambda text: _note(text, bar),
             use_sim_time=args.use_sim_time,
+            measured=save,
         )
     except LiveSweepError as error:
         raise CommandError(str(error)) from None

@@ -192,6 +192,15 @@ def summary(result: SweepResult, fits: Sequence[GroupFit], wall_s: float) -> str
     return "\n".join(lines)
 
 
+def write_points(directory: Path, result: SweepResult) -> Path:
+    """The sweep's measured points as ``directory/sweep.csv`` (written whole or not at all)."""
+    directory.mkdir(parents=True, exist_ok=True)
+    path = directory / "sweep.csv"
+    with atomic_text(path) as stream:
+        result.write_csv(stream)
+    return path
+
+
 def write_outputs(
     directory: Path,
     result: SweepResult,
@@ -200,11 +209,7 @@ def write_outputs(
 ) -> list[Path]:
     from feeder_ros.identification.plots import plot_bode_magnitude, plot_speed_sweep
 
-    directory.mkdir(parents=True, exist_ok=True)
-    written = []
-    with atomic_text(directory / "sweep.csv") as stream:
-        result.write_csv(stream)
-    written.append(directory / "sweep.csv")
+    written = [write_points(directory, result)]
     if result.ok_count:
         written.append(plot_speed_sweep(result, directory / "fig9.png"))
     if document is not None:

@@ -27,7 +27,9 @@ the applied values are recorded), wait until ``drive/state`` is RUNNING at the s
 ``settle_s`` on the node clock (simulated time works), then measure. The drive is stopped at the
 end, on errors and on Ctrl-C (rclpy's signal handlers are not installed, so the context is still
 up to send the stop; if even that fails, the heartbeat stops and the drive's watchdog ramps the
-drive to zero).
+drive to zero). The measured points go to the caller (``measured``) before the client's node is
+torn down; a teardown that hangs in the middleware ends the process after
+``runner.TEARDOWN_LIMIT_S`` with status 1 and the stacks on stderr, the points already saved.
 
 The meters (:class:`TransitMeter`, :class:`StatusMeter`, :class:`TruthMeter`) are plain Python and
 unit-testable without ROS.
@@ -35,6 +37,7 @@ unit-testable without ROS.
 
 from __future__ import annotations
 
+import faulthandler
 import itertools
 import math
 import threading
@@ -61,6 +64,7 @@ from std_srvs.srv import Trigger
 
 from feeder_ros.identification.sweep import SweepPlan, SweepPoint, SweepResult
 from feeder_ros.msg import DriveState, PartSensorEvent, PartStateArray, SpeedStatus
+from feeder_ros.nodes import runner
 from feeder_ros.srv import SetDrive
 
 __all__ = [
@@ -631,10 +635,15 @@ def _spinning_node(namespace: str, use_sim_time: bool = False) -> Iterator[Node]
     try:
         yield node
     finally:
-        executor.shutdown(timeout_sec=2.0)
-        thread.join(timeout=5.0)
-        node.destroy_node()
-        rclpy.shutdown(context=context)
+        # the middleware's teardown can hang for good (see runner.TEARDOWN_LIMIT_S): bounded
+        faulthandler.dump_traceback_later(runner.TEARDOWN_LIMIT_S, exit=True)
+        try:
+            executor.shutdown(timeout_sec=2.0)
+            thread.join(timeout=5.0)
+            node.destroy_node()
+            rclpy.shutdown(context=context)
+        finally:
+            faulthandler.cancel_dump_traceback_later()
 
 
 def run_live_sweep(
@@ -645,10 +654,13 @@ def run_live_sweep(
     progress: Progress | None = None,
     log: Log | None = None,
     use_sim_time: bool = False,
+    measured: Callable[[SweepResult], None] | None = None,
 ) -> SweepResult:
     """Run ``plan`` on the cell in ``namespace`` (see the module docstring); the drive is stopped
     at the end, on errors and on Ctrl-C. ``use_sim_time``: settle and windows on the cell's
-    ``/clock`` (a simulator running faster than real time), as the cell's nodes use it."""
+    ``/clock`` (a simulator running faster than real time), as the cell's nodes use it.
+    ``measured`` gets the result once the drive is stopped and before the client's node is torn
+    down (save it there: a teardown that hangs ends the process)."""
     say: Log = log or (lambda text: None)
     check_live_plan(plan)
     if namespace and not namespace.startswith("/"):
@@ -656,6 +668,9 @@ def run_live_sweep(
     with _spinning_node(namespace, use_sim_time) as node:
         client = SweepClient(node, measure, say, manage_lifecycle)
         try:
-            return client.run(plan, progress)
+            result = client.run(plan, progress)
         finally:
             client.stop()
+        if measured is not None:
+            measured(result)
+        return result

@@ -14,6 +14,7 @@ from pathlib import Path
 import pytest
 from rclpy.qos import QoSProfile, ReliabilityPolicy
 from ros_test_tools import REPO, probe_node, running, wait_until
+from stuck_code import TEARDOWN_TIMEOUT_TEXT, stuck_teardown_script
 
 from feeder_ros.cli.sim import load_parameters
 from feeder_ros.identification.offline_sweep import offline_sweep
@@ -216,3 +217,39 @@ def test_live_sweep_on_the_cells_clock_with_a_simulator_faster_than_real_time(
     for measured, exact in zip(live.points, offline_sweep(plant, plan).points, strict=True):
         assert measured.ok, measured.reason
         assert measured.speed_mps == pytest.approx(exact.speed_mps, rel=LIVE_TOLERANCE)
+
+
+SWEEP_WITH_A_STUCK_TEARDOWN = stuck_teardown_script(
+    """
+from rclpy.node import Node
+
+from feeder_ros.cli.main import main
+
+Node.destroy_node = stuck  # the sweep client's node: the only one in this process
+sys.exit(main(sys.argv[1:]))
+"""
+)
+
+
+def test_a_live_sweep_whose_teardown_hangs_ends_with_its_points_saved(tmp_path: Path) -> None:
+    """The client's node teardown stuck in compiled code (as Fast DDS's once was): the process
+    ends after the watchdog's limit with status 1 and the stuck call named, and the points it
+    measured are on disk already (the fit would have come after the teardown)."""
+    script = tmp_path / "stuck_sweep.py"
+    script.write_text(SWEEP_WITH_A_STUCK_TEARDOWN)
+    out = tmp_path / "stuck"
+    with running(SIMULATOR), running(DRIVE):
+        sweep = subprocess.run(
+            [sys.executable, str(script), *SWEEP[1:], "--frequencies", "21", "--window", "2",
+             "--output", str(out)],
+            capture_output=True, text=True, timeout=120,  # without the watchdog: never ends
+        )  # fmt: skip
+    assert sweep.returncode == 1, sweep.stdout + sweep.stderr
+    assert TEARDOWN_TIMEOUT_TEXT in sweep.stderr
+    assert "in stuck" in sweep.stderr
+    assert f"measured points saved to {out / 'sweep.csv'}" in sweep.stderr
+    assert "sweep:" not in sweep.stdout  # the summary comes after the teardown: never reached
+    saved = SweepResult.read_csv(out / "sweep.csv")
+    assert [p.frequency_hz for p in saved.points] == [21.0]
+    assert saved.points[0].ok, saved.points[0].reason
+    assert saved.points[0].speed_mps > 0.0
