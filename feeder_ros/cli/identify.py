@@ -253,10 +253,19 @@ def _sweep_live(args: argparse.Namespace, plan: SweepPlan, show: bool) -> SweepR
 
     def save(result: SweepResult) -> None:
         # before the client's teardown, which can hang in the middleware (then the process ends
-        # with status 1 and these points are what is left of the sweep)
+        # with status 1 and these points are what is left of the sweep); a sweep cut short by an
+        # error or Ctrl-C keeps the points measured until then
         if args.output is not None:
             path = write_points(args.output, result)
-            _note(f"measured points saved to {path}", bar)
+            count = len(result.points)
+            if count == plan.point_count:
+                _note(f"measured points saved to {path}", bar)
+            else:
+                _note(
+                    f"{count} of {plan.point_count} points measured, saved to {path} (fit them "
+                    f"with: feeder identify --source csv {path})",
+                    bar,
+                )
 
     try:
         return run_live_sweep(

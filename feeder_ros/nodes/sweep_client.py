@@ -28,8 +28,9 @@ the applied values are recorded), wait until ``drive/state`` is RUNNING at the s
 end, on errors and on Ctrl-C (rclpy's signal handlers are not installed, so the context is still
 up to send the stop; if even that fails, the heartbeat stops and the drive's watchdog ramps the
 drive to zero). The measured points go to the caller (``measured``) before the client's node is
-torn down; a teardown that hangs in the middleware ends the process after
-``runner.TEARDOWN_LIMIT_S`` with status 1 and the stacks on stderr, the points already saved.
+torn down, also those of a sweep cut short by an error or Ctrl-C; a teardown that hangs in the
+middleware ends the process after ``runner.TEARDOWN_LIMIT_S`` with status 1 and the stacks on
+stderr, the points already saved.
 
 The meters (:class:`TransitMeter`, :class:`StatusMeter`, :class:`TruthMeter`) are plain Python and
 unit-testable without ROS.
@@ -268,6 +269,9 @@ class SweepClient:
         self._state: DriveState | None = None
         self._beating = False
         self._commanded = False  # set_drive was called: stop() has something to stop
+        #: the points measured so far (all of them once :meth:`run` returns), in plan order
+        self.points: list[SweepPoint] = []
+        self._scale = math.nan  # the drive's full-scale force of the running sweep [N]
         self._heartbeat = node.create_publisher(Header, "heartbeat", 10)
         node.create_timer(HEARTBEAT_PERIOD_S, self._beat)
         node.create_subscription(DriveState, "drive/state", self._on_state, RELIABLE)
@@ -450,13 +454,18 @@ class SweepClient:
                 f"{plan.full_scale_force_n:g} N): forces are the drive's"
             )
         scale = full_scale if full_scale is not None else plan.full_scale_force_n
-        points: list[SweepPoint] = []
+        self._scale = scale
+        self.points = []
         total = plan.point_count
         for mass, amplitude, frequency in plan.settings():
-            points.append(self.point(plan, frequency, amplitude, mass, scale))
+            self.points.append(self.point(plan, frequency, amplitude, mass, scale))
             if progress is not None:
-                progress(len(points), total)
-        return SweepResult(tuple(points), f"live {self.node.get_namespace()}", scale)
+                progress(len(self.points), total)
+        return self.result()
+
+    def result(self) -> SweepResult:
+        """The points measured so far as a result (an interrupted sweep's are worth keeping)."""
+        return SweepResult(tuple(self.points), f"live {self.node.get_namespace()}", self._scale)
 
     def point(
         self, plan: SweepPlan, frequency: float, amplitude: float, mass: float, scale: float
@@ -660,7 +669,8 @@ def run_live_sweep(
     at the end, on errors and on Ctrl-C. ``use_sim_time``: settle and windows on the cell's
     ``/clock`` (a simulator running faster than real time), as the cell's nodes use it.
     ``measured`` gets the result once the drive is stopped and before the client's node is torn
-    down (save it there: a teardown that hangs ends the process)."""
+    down (save it there: a teardown that hangs ends the process); on an error or Ctrl-C it gets
+    the points measured until then, if any, and the error propagates."""
     say: Log = log or (lambda text: None)
     check_live_plan(plan)
     if namespace and not namespace.startswith("/"):
@@ -668,9 +678,11 @@ def run_live_sweep(
     with _spinning_node(namespace, use_sim_time) as node:
         client = SweepClient(node, measure, say, manage_lifecycle)
         try:
-            result = client.run(plan, progress)
+            client.run(plan, progress)
         finally:
-            client.stop()
-        if measured is not None:
-            measured(result)
-        return result
+            try:
+                client.stop()
+            finally:
+                if measured is not None and client.points:
+                    measured(client.result())
+        return client.result()

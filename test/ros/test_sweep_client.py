@@ -138,25 +138,29 @@ def test_live_sweep_matches_the_offline_sweep_and_ctrl_c_stops_the_drive(tmp_pat
         assert wait_until(lambda: bool(states) and states[-1].state == DriveState.STATE_IDLE, 10)
         assert states[-1].amplitude_percent == 0.0
 
-        # Ctrl-C in the middle of a sweep: exit status 130, and the drive ramps to zero
+        # Ctrl-C in the middle of a sweep, on its second point: exit status 130, the drive ramps
+        # to zero, and the first point is saved
         with lock:
             states.clear()
+        partial = tmp_path / "partial"
         interrupted = subprocess.Popen(
-            [*SWEEP, "--frequencies", "20:22:0.5", "--window", "10"],
+            [*SWEEP, "--frequencies", "20:22:0.5", "--window", "3", "--output", str(partial)],
             stdout=subprocess.PIPE,
             stderr=subprocess.STDOUT,
             text=True,
         )
         try:
 
-            def driving() -> bool:
+            def second_point() -> bool:
                 with lock:
                     return any(
-                        s.state == DriveState.STATE_RUNNING and s.amplitude_percent == 40.0
+                        s.state in (DriveState.STATE_RUNNING, DriveState.STATE_RAMPING)
+                        and s.frequency_hz > 20.25
+                        and s.amplitude_percent == 40.0
                         for s in states
                     )
 
-            assert wait_until(driving, 60), "the interrupted sweep never drove the feeder"
+            assert wait_until(second_point, 90), "the sweep never reached its second point"
             interrupted.send_signal(signal.SIGINT)
             output, _ = interrupted.communicate(timeout=30)
         finally:
@@ -164,6 +168,9 @@ def test_live_sweep_matches_the_offline_sweep_and_ctrl_c_stops_the_drive(tmp_pat
                 interrupted.kill()
         assert interrupted.returncode == 130, output
         assert "interrupted" in output
+        assert f"1 of 5 points measured, saved to {partial / 'sweep.csv'}" in output
+        first = SweepResult.read_csv(partial / "sweep.csv").points
+        assert [(p.frequency_hz, p.ok) for p in first] == [(20.0, True)], first
         assert wait_until(lambda: states[-1].state == DriveState.STATE_IDLE, 10), states[-1]
         assert states[-1].amplitude_percent == 0.0
         assert states[-1].fault_reason == ""  # stopped, not a watchdog fault
