@@ -264,7 +264,7 @@ def test_analyze_cli_outputs_and_bad_input(tmp_path: Path) -> None:
          "--output", str(tmp_path / "out")],
         capture_output=True, text=True,
     )  # fmt: skip
-    assert mixed.returncode == 0, mixed.stderr
+    assert mixed.returncode == 1, mixed.stderr  # one bag failed: the good one is reported
     assert "comparison:" in mixed.stdout
     assert "100%" in mixed.stderr  # the progress bar
     assert "not an MCAP bag" in mixed.stderr
@@ -272,6 +272,38 @@ def test_analyze_cli_outputs_and_bad_input(tmp_path: Path) -> None:
     assert rows[1].split(",")[:2] == [str(tmp_path / "good"), "ok"]
     assert rows[2].split(",")[1] == "error"
     assert (tmp_path / "out" / "good_segments.csv").is_file()
+
+
+def test_analyze_cli_reports_data_lost_to_a_corrupt_chunk(tmp_path: Path) -> None:
+    """A corrupt chunk in the middle: the rest is analysed and written, but the loss is said (the
+    counts and feed rates are short) and the exit status is 1."""
+    write_feeder_bag(tmp_path / "bag", chunk_size=8192, extras=False)
+    mcap = tmp_path / "bag" / "bag_0.mcap"
+    with mcap.open("rb") as stream:
+        summary = make_reader(stream).get_summary()
+    assert summary is not None
+    chunks = sorted(summary.chunk_indexes, key=lambda c: c.chunk_start_offset)
+    middle = chunks[len(chunks) // 2]
+    data = bytearray(mcap.read_bytes())
+    at = middle.chunk_start_offset + middle.chunk_length // 2
+    data[at : at + 64] = bytes(64)
+    mcap.write_bytes(bytes(data))
+    out = tmp_path / "out"
+    result = subprocess.run(
+        [FEEDER, "analyze", str(tmp_path / "bag"), "--output", str(out)],
+        capture_output=True,
+        text=True,
+    )
+    assert result.returncode == 1, result.stderr
+    lost_s = (middle.message_end_time - middle.message_start_time) * 1e-9
+    assert f"DATA LOST: 1 corrupt chunk(s) skipped, about {lost_s:.3g} s" in result.stdout
+    assert "1 corrupt chunk(s) skipped" in result.stderr
+    document = json.loads((out / "analysis.json").read_text())
+    (bag,) = document["bags"]
+    assert bag["chunks_lost"] == 1
+    assert bag["lost_s"] == pytest.approx(lost_s)
+    assert "data lost" in (out / "comparison.csv").read_text()
+    assert "Data lost" in (out / "report.html").read_text()
 
 
 def test_bench_bag_quick_run_writes_its_report(tmp_path: Path) -> None:

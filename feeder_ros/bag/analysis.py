@@ -185,6 +185,11 @@ class BagAnalysis:
     drive_source: str = "none"
     problems: list[str] = field(default_factory=list)
     cut_short: bool = False
+    #: chunks the reader skipped (corrupt): their messages are missing inside the analysed span, so
+    #: counts and feed rates come out short; ``lost_s`` is the recording time they spanned (as far
+    #: as their headers tell)
+    chunks_lost: int = 0
+    lost_s: float = 0.0
     error: str | None = None
 
     @property
@@ -200,6 +205,11 @@ class BagAnalysis:
     @property
     def ok(self) -> bool:
         return self.error is None
+
+    @property
+    def data_lost(self) -> bool:
+        """Messages inside the analysed span are missing (chunks skipped)."""
+        return self.chunks_lost > 0
 
     def totals(self) -> dict[str, float]:
         """Duration-weighted means over the driven segments, and the overall feed rate."""
@@ -230,6 +240,8 @@ class BagAnalysis:
             "end_ns": self.end_ns,
             "duration_s": self.duration_s,
             "cut_short": self.cut_short,
+            "chunks_lost": self.chunks_lost,
+            "lost_s": self.lost_s,
             "drive_source": self.drive_source,
             "messages": dict(self.messages),
             "topics": {k: list(v) for k, v in self.topics.items()},
@@ -593,6 +605,9 @@ def analyze_bag(
             diag = [DiagnosticChange(d.t_s - first, d.name, d.level, d.message) for d in diag]
     result.problems[:0] = [str(p) for p in bag.problems]
     result.cut_short = bag.cut_short
+    skipped = [p for p in bag.problems if p.kind == "corrupt_chunk"]
+    result.chunks_lost = len(skipped)
+    result.lost_s = sum(p.lost_ns or 0 for p in skipped) * 1e-9
     result.diagnostics = diag
     for kind, topics in result.topics.items():
         if len(topics) > 1:

@@ -100,6 +100,9 @@ class BagProblem:
     detail: str
     offset: int | None = None
     topic: str | None = None
+    #: a skipped chunk: the recording time its messages spanned (log times, from its header) [ns];
+    #: None when unknown (its header unreadable)
+    lost_ns: int | None = None
 
     def __str__(self) -> str:
         where = [str(self.file)] if self.file is not None else []
@@ -108,4 +111,5 @@ class BagProblem:
         if self.topic is not None:
             where.append(f"topic {self.topic}")
         prefix = f"{', '.join(where)}: " if where else ""
-        return f"[{self.kind}] {prefix}{self.detail}"
+        lost = f" ({self.lost_ns * 1e-9:.4g} s of recording lost)" if self.lost_ns else ""
+        return f"[{self.kind}] {prefix}{self.detail}{lost}"

@@ -73,7 +73,7 @@ def comparison_rows(analyses: Sequence[BagAnalysis]) -> list[dict[str, Any]]:
         rows.append(
             {
                 "bag": str(a.path),
-                "status": "error" if not a.ok else ("cut short" if a.cut_short else "ok"),
+                "status": _status(a),
                 "duration_s": totals.get("duration_s", math.nan),
                 "segments": len(a.segments),
                 "speed_mm_s": totals.get("speed_mps", math.nan) * 1e3,
@@ -85,6 +85,14 @@ def comparison_rows(analyses: Sequence[BagAnalysis]) -> list[dict[str, Any]]:
             }
         )
     return rows
+
+
+def _status(a: BagAnalysis) -> str:
+    if not a.ok:
+        return "error"
+    if a.data_lost:
+        return "data lost"
+    return "cut short" if a.cut_short else "ok"
 
 
 def _table(headers: Sequence[str], rows: Sequence[Sequence[str]]) -> str:
@@ -109,6 +117,11 @@ def format_summary(analyses: Sequence[BagAnalysis]) -> str:
             + (", CUT SHORT (the recorder did not close the bag)" if a.cut_short else "")
         )
         parts.append(head)
+        if a.data_lost:
+            parts.append(
+                f"  DATA LOST: {a.chunks_lost} corrupt chunk(s) skipped, about {a.lost_s:.3g} s "
+                "of recording: counts, exits and feed rates are short (see the problems below)"
+            )
         counts = ", ".join(f"{k.rsplit('/', 1)[-1]} {v}" for k, v in sorted(a.messages.items()))
         if counts:
             parts.append(f"  messages: {counts}")
@@ -311,6 +324,11 @@ def write_outputs(analyses: Sequence[BagAnalysis], directory: Path) -> list[Path
             f"<p>{a.duration_s:.3f} s; drive from {html.escape(a.drive_source)}; "
             f"{len(a.segments)} segment(s)" + (", <b>cut short</b>" if a.cut_short else "") + "</p>"
         )
+        if a.data_lost:
+            sections.append(
+                f"<p class='error'><b>Data lost</b>: {a.chunks_lost} corrupt chunk(s) skipped, "
+                f"about {a.lost_s:.3g} s of recording: counts, exits and feed rates are short.</p>"
+            )
         rows = segment_rows(a)
         put(f"{stem}_segments.csv", _csv(rows))
         sections += ["<h3>Segments</h3>", _html_table(rows)]

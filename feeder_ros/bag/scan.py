@@ -149,9 +149,14 @@ class FileScan:
     # ------------------------------------------------------------------ records
 
     def _problem(
-        self, kind: str, detail: str, offset: int | None = None, topic: str | None = None
+        self,
+        kind: str,
+        detail: str,
+        offset: int | None = None,
+        topic: str | None = None,
+        lost_ns: int | None = None,
     ) -> None:
-        self.report(BagProblem(kind, self.path, detail, offset, topic))
+        self.report(BagProblem(kind, self.path, detail, offset, topic, lost_ns))
 
     def _schema(self, body: bytes | memoryview) -> None:
         (sid,) = _U16.unpack_from(body, 0)
@@ -367,7 +372,7 @@ class FileScan:
     ) -> Iterator[ChunkData]:
         body = chunk.body
         try:
-            _, _, usize, crc = _CHUNK_HEAD.unpack_from(body, 0)
+            start, end, usize, crc = _CHUNK_HEAD.unpack_from(body, 0)
             compression, pos = _read_str(body, 28)
             (clen,) = _U64.unpack_from(body, pos)
             data = memoryview(body)[pos + 8 : pos + 8 + clen]
@@ -380,6 +385,7 @@ class FileScan:
                 chunk.offset,
             )
             return
+        lost = max(end - start, 0)  # the recording time a skip of this chunk loses
         index = self._parse_indexes(chunk) if trust_index and chunk.indexes else None
         if index is not None:
             known = all(cid in self.channels for cid in index)
@@ -396,6 +402,7 @@ class FileScan:
                 "corrupt_chunk",
                 f"implausible uncompressed size {usize} bytes; chunk skipped",
                 chunk.offset,
+                lost_ns=lost,
             )
             return
         checksummed = False  # zstd verifies its own frame checksum (XXH64) while decompressing
@@ -412,6 +419,7 @@ class FileScan:
                     "corrupt_chunk",
                     f"unknown compression {compression!r}; chunk skipped",
                     chunk.offset,
+                    lost_ns=lost,
                 )
                 return
         except Exception as err:  # zstd/lz4 raise their own error types
@@ -419,6 +427,7 @@ class FileScan:
                 "corrupt_chunk",
                 f"{compression} decompression failed ({err}); chunk skipped",
                 chunk.offset,
+                lost_ns=lost,
             )
             return
         if len(raw) != usize:
@@ -426,6 +435,7 @@ class FileScan:
                 "corrupt_chunk",
                 f"decompressed to {len(raw)} bytes, header says {usize}; chunk skipped",
                 chunk.offset,
+                lost_ns=lost,
             )
             return
         if crc and self.verify_crc and not checksummed and zlib.crc32(raw) != crc:
@@ -433,6 +443,7 @@ class FileScan:
                 "corrupt_chunk",
                 "CRC mismatch of the uncompressed records; chunk skipped",
                 chunk.offset,
+                lost_ns=lost,
             )
             return
         buf = np.frombuffer(raw, np.uint8)

@@ -1,8 +1,10 @@
 """``feeder analyze BAG [BAG ...]``: segments, speeds, slip, feed rate, diagnostics, sweeps.
 
 The work is in :mod:`feeder_ros.bag.analysis` (streaming, ROS free) and
-:mod:`feeder_ros.bag.report` (tables, CSV, JSON, plots, HTML). Exit status 0 when at least one bag
-was analysed, 2 when none could be.
+:mod:`feeder_ros.bag.report` (tables, CSV, JSON, plots, HTML). Exit status: 0 when every bag was
+analysed whole; 1 when some bag could not be analysed or lost data inside its span (corrupt chunks
+skipped: its counts and feed rates are short), the others' results printed and written all the
+same; 2 when none could be analysed.
 """
 
 from __future__ import annotations
@@ -15,9 +17,14 @@ from feeder_ros.cli.arguments import non_negative_float
 from feeder_ros.cli.main import CommandError
 from feeder_ros.cli.progress import ProgressBar
 
-__all__ = ["HELP", "add_arguments", "run"]
+__all__ = ["EPILOG", "HELP", "add_arguments", "run"]
 
 HELP = "analyse recorded feeder bags: drive segments, part speed, slip, feed rate, diagnostics"
+EPILOG = (
+    "exit status: 0 every bag analysed whole; 1 some bag could not be analysed or lost data "
+    "inside its span (corrupt chunks skipped: its counts and feed rates are short), the other "
+    "results printed and written all the same; 2 no bag could be analysed"
+)
 
 
 def add_arguments(parser: argparse.ArgumentParser) -> None:
@@ -77,7 +84,16 @@ def run(args: argparse.Namespace) -> int:
         print(
             f"wrote {len(written)} file(s) to {args.output} (report: {args.output / 'report.html'})"
         )
+    status = 0
     for a in analyses:
         if not a.ok:
             print(f"feeder analyze: error: {a.error}", file=sys.stderr)
-    return 0 if any(a.ok for a in analyses) else 2
+            status = 1
+        elif a.data_lost:
+            print(
+                f"feeder analyze: {a.path}: {a.chunks_lost} corrupt chunk(s) skipped, about "
+                f"{a.lost_s:.3g} s of recording lost: its counts and feed rates are short",
+                file=sys.stderr,
+            )
+            status = 1
+    return status

@@ -3,6 +3,7 @@
 Each sub-command lives in its own module of :mod:`feeder_ros.cli` and exposes
 
 * ``HELP``: a one-line summary shown by ``feeder --help``;
+* ``EPILOG`` (optional): text after the options in ``feeder COMMAND --help``;
 * ``add_arguments(parser)``: declares its options on an :class:`argparse.ArgumentParser`;
 * ``run(args) -> int``: does the work (through library modules) and returns the exit status.
 
@@ -56,7 +57,9 @@ def build_parser() -> argparse.ArgumentParser:
     sub = parser.add_subparsers(dest="command", metavar="COMMAND", required=True)
     for name in SUBCOMMANDS:
         module = _load(name)
-        child = sub.add_parser(name, help=module.HELP, description=module.HELP)
+        child = sub.add_parser(
+            name, help=module.HELP, description=module.HELP, epilog=getattr(module, "EPILOG", None)
+        )
         module.add_arguments(child)
         child.set_defaults(_run=module.run)
     return parser

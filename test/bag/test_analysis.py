@@ -352,6 +352,7 @@ def test_truncated_file_gives_partial_results(tmp_path: Path) -> None:
     mcap.write_bytes(data[: len(data) // 2])
     result = analyze_bag(tmp_path / "bag")
     assert result.cut_short
+    assert not result.data_lost  # what was read is whole up to the cut
     assert any("[cut_short]" in p for p in result.problems)
     assert 0 < result.duration_s < 5.0
     assert result.segments[0].frequency_hz == 30.0
@@ -374,6 +375,14 @@ def test_corrupt_chunk_is_named_and_the_rest_analysed(tmp_path: Path) -> None:
     corrupt = [p for p in result.problems if p.startswith("[corrupt_chunk]")]
     assert len(corrupt) == 1
     assert f"byte {middle.chunk_start_offset}" in corrupt[0]
+    # the loss is counted: the recording time the skipped chunk spanned (its index's log times)
+    lost_s = (middle.message_end_time - middle.message_start_time) * 1e-9
+    assert lost_s > 0.0
+    assert result.data_lost
+    assert result.chunks_lost == 1
+    assert result.lost_s == pytest.approx(lost_s, abs=1e-12)
+    assert f"({lost_s:.4g} s of recording lost)" in corrupt[0]
+    assert result.as_dict()["chunks_lost"] == 1
     assert [s.frequency_hz for s in result.segments][:2] == [30.0, 40.0]
     assert result.segments[0].speed_ground_truth_mps == pytest.approx(0.003)
 
