@@ -8,6 +8,7 @@ from collections.abc import Callable, Sequence
 from typing import Any
 
 import rclpy
+from rclpy._rclpy_pybind11 import RCLError
 from rclpy.context import Context
 from rclpy.exceptions import ParameterException
 from rclpy.executors import ExternalShutdownException, SingleThreadedExecutor
@@ -58,11 +59,19 @@ def run_node(make_node: Callable[[], Node], args: Sequence[str] | None = None) -
     rclpy's signal handlers turn SIGINT (Ctrl-C) and SIGTERM into a context shutdown, so a cell
     supervisor stopping the node gets the same orderly exit: node destroyed, context shut down,
     exit status 0. A teardown that takes longer than :data:`TEARDOWN_LIMIT_S` ends the process
-    with status 1 (stacks on stderr).
+    with status 1 (stacks on stderr). Bad ROS arguments (an unreadable or malformed params file)
+    and parameter values the node refuses end it with status 2 and the reason logged.
     """
     argv = list(sys.argv if args is None else args)
     try:
-        with rclpy.init(args=argv):
+        initialized = rclpy.init(args=argv)
+    except RCLError as error:
+        # the ROS arguments themselves are bad (an unreadable or malformed --params-file, a bad
+        # remapping): rcl names what it could not use
+        rclpy.logging.get_logger("feeder_ros").error(f"refusing to start: {error}")
+        return 2
+    try:
+        with initialized:
             try:
                 node = make_node()
             except (ParameterError, ParameterException, ValueError) as error:
