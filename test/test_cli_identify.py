@@ -171,6 +171,20 @@ def test_bad_options_are_refused(
     assert needle in _fails(args, capsys)
 
 
+def test_the_command_line_completes_a_plan_file_without_the_grid(
+    tmp_path: Path, capsys: pytest.CaptureFixture[str]
+) -> None:
+    plan = tmp_path / "plan.yaml"
+    plan.write_text("sweep:\n  frequencies_hz: '20, 21'\n  settle_s: 1\n  window_s: 2\n")
+    args = ["identify", "--source", "sim", "--plan", str(plan), "--amplitudes", "40", "--no-fit"]
+    assert main([*args, "--masses", "0.05"]) == 0
+    assert "sweep: 2 points, 2 usable, source sim" in capsys.readouterr().out
+    assert main(args) == 2  # the masses are in neither
+    assert "sweep.part_masses_kg=None: required" in capsys.readouterr().err
+    assert main([*args, "--masses", "x"]) == 2
+    assert "--masses: part_masses_kg='x': not a number" in capsys.readouterr().err
+
+
 def test_bad_plan_file_names_the_entry(tmp_path: Path, capsys: pytest.CaptureFixture[str]) -> None:
     plan = tmp_path / "plan.yaml"
     plan.write_text("sweep:\n  frequencies_hz: 20\n  amplitudes_percent: 40\n  masses: 0.03\n")

@@ -14,7 +14,7 @@ import sys
 from pathlib import Path
 
 from feeder_ros.cli.arguments import non_negative_float
-from feeder_ros.cli.main import CommandError
+from feeder_ros.cli.outputs import check_output_dir
 from feeder_ros.cli.progress import ProgressBar
 
 __all__ = ["EPILOG", "HELP", "add_arguments", "run"]
@@ -66,8 +66,7 @@ def run(args: argparse.Namespace) -> int:
     from feeder_ros.bag.analysis import analyze_bags
     from feeder_ros.bag.report import format_summary, write_outputs
 
-    if args.output is not None and args.output.exists() and not args.output.is_dir():
-        raise CommandError(f"--output {args.output}: exists and is not a directory")
+    check_output_dir(args.output, "--output")
     show = bool(args.progress) or sys.stderr.isatty()
     bar = _BagProgress([str(p) for p in args.bags], show)
     try:

@@ -6,7 +6,13 @@ import argparse
 import math
 from collections.abc import Callable
 
-__all__ = ["non_negative_float", "non_negative_int", "positive_float", "positive_int"]
+__all__ = [
+    "int_at_least",
+    "non_negative_float",
+    "non_negative_int",
+    "positive_float",
+    "positive_int",
+]
 
 
 def _number(text: str, kind: Callable[[str], float], what: str) -> float:
@@ -45,3 +51,16 @@ def non_negative_int(text: str) -> int:
     if value < 0:
         raise argparse.ArgumentTypeError(f"{text!r} must be >= 0")
     return value
+
+
+def int_at_least(minimum: int) -> Callable[[str], int]:
+    """A converter for integers >= ``minimum``."""
+
+    def convert(text: str) -> int:
+        value = int(_number(text, int, "an integer"))
+        if value < minimum:
+            raise argparse.ArgumentTypeError(f"{text!r} must be >= {minimum}")
+        return value
+
+    convert.__name__ = f"integer >= {minimum}"  # argparse names the type in some messages
+    return convert

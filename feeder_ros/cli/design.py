@@ -22,8 +22,9 @@ import math
 import sys
 from pathlib import Path
 
-from feeder_ros.cli.arguments import positive_int
+from feeder_ros.cli.arguments import int_at_least, non_negative_int, positive_int
 from feeder_ros.cli.main import CommandError
+from feeder_ros.cli.outputs import check_output_dir
 from feeder_ros.cli.progress import ProgressBar
 from feeder_ros.cli.sim import add_plant_arguments, default_config_path, plant_from_arguments
 from feeder_ros.design.optimizer import (
@@ -73,7 +74,9 @@ def add_arguments(parser: argparse.ArgumentParser) -> None:
     parser.add_argument(
         "--target-speed", type=_speed, metavar="M_PER_S", help="min-force: part speed to reach"
     )
-    parser.add_argument("--seed", type=int, default=0, help="optimiser seed (default 0)")
+    parser.add_argument(
+        "--seed", type=non_negative_int, default=0, help="optimiser seed, >= 0 (default 0)"
+    )
     parser.add_argument(
         "--generations", type=positive_int, default=30, help="generations at most (default 30)"
     )
@@ -91,9 +94,9 @@ def add_arguments(parser: argparse.ArgumentParser) -> None:
     )
     parser.add_argument(
         "--map-points",
-        type=positive_int,
+        type=int_at_least(2),
         default=15,
-        help="speed-map grid points per axis (--output; default 15)",
+        help="speed-map grid points per axis, >= 2 (--output; default 15)",
     )
     parser.add_argument("--output", type=Path, metavar="DIR", help="write the report files here")
     parser.add_argument(
@@ -125,6 +128,7 @@ def run(args: argparse.Namespace) -> int:
         raise CommandError("--objective min-force needs --target-speed (m/s)")
     if args.objective == "max-speed" and args.target_speed is not None:
         raise CommandError("--target-speed is for --objective min-force")
+    check_output_dir(args.output, "--output")
     design, plant, plant_label = _load(args)
     problem = DesignProblem(
         space=design.space,

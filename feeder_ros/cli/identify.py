@@ -31,6 +31,7 @@ import yaml
 
 from feeder_ros.cli.arguments import non_negative_float, positive_float
 from feeder_ros.cli.main import CommandError
+from feeder_ros.cli.outputs import check_output_dir, check_output_file
 from feeder_ros.cli.progress import ProgressBar
 from feeder_ros.cli.sim import add_plant_arguments, default_config_path, plant_from_arguments
 from feeder_ros.identification.group_fit import DEFAULT_FOLDS, FitSettings, GroupFit, fit_group
@@ -167,8 +168,20 @@ def load_plan(args: argparse.Namespace) -> tuple[SweepPlan, FitSettings]:
     unknown = sorted(str(k) for k in document if k not in ("sweep", "fit"))
     if unknown:
         raise CommandError(f"{path}: unknown section(s) {', '.join(unknown)} (known: sweep, fit)")
+    sweep = dict(document["sweep"])
+    # the grid the command line gives completes a plan file without it (and overrides it below)
+    for name, flag, value in (
+        ("frequencies_hz", "--frequencies", args.frequencies),
+        ("amplitudes_percent", "--amplitudes", args.amplitudes),
+        ("part_masses_kg", "--masses", args.masses),
+    ):
+        if value is not None and name not in sweep:
+            try:
+                sweep[name] = list(parse_values(name, value))
+            except SweepPlanError as error:
+                raise CommandError(f"{flag}: {error}") from None
     try:
-        plan = SweepPlan.from_mapping(document["sweep"])
+        plan = SweepPlan.from_mapping(sweep)
     except SweepPlanError as error:
         raise CommandError(f"{path}: sweep.{error}") from None
     fit_section = document.get("fit") or {}
@@ -338,8 +351,8 @@ def _sweep_csv(args: argparse.Namespace) -> SweepResult:
 
 
 def run(args: argparse.Namespace) -> int:
-    if args.output is not None and args.output.exists() and not args.output.is_dir():
-        raise CommandError(f"--output {args.output}: exists and is not a directory")
+    check_output_dir(args.output, "--output")
+    check_output_file(args.model_out, "--model-out")
     if args.model_out is not None and args.no_fit:
         raise CommandError("--model-out needs the fit (drop --no-fit)")
     if args.source in ("sim", "live") and args.inputs:

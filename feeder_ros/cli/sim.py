@@ -13,6 +13,7 @@ import argparse
 import csv
 import io
 import math
+import os
 import sys
 import time
 from collections.abc import Mapping, Sequence
@@ -25,6 +26,7 @@ import yaml
 from feeder_ros.atomic_files import atomic_text
 from feeder_ros.cli.arguments import non_negative_int, positive_float
 from feeder_ros.cli.main import CommandError
+from feeder_ros.cli.outputs import check_output_dir, check_output_file
 from feeder_ros.cli.progress import ProgressBar
 from feeder_ros.nodes.platform_simulator_parameters import NODE_PARAMETERS
 from feeder_ros.physics.parameters import FeederParameters, ParameterError, parse_parameter_value
@@ -232,6 +234,25 @@ def default_parts(params: FeederParameters, count: int) -> tuple[PartSpec, ...]:
     return tuple(PartSpec(position_m=i * spacing) for i in range(count))
 
 
+def _check_sample_memory(duration_s: float, rate_hz: float, parts: int) -> None:
+    """Refuse a run whose samples alone would not fit in this machine's memory (numpy would fail
+    with MemoryError after the simulation started)."""
+    samples = math.floor(duration_s * rate_hz * (1.0 + 1e-12)) + 1
+    # time, carrier x, v, a (float64) and branch (int8); per part x, v (float64) and phase (int8);
+    # twice: chunks and their concatenation, or the arrays and the CSV's formatting
+    need = 2.0 * samples * (8 * 4 + 1 + parts * 17)
+    try:
+        memory = float(os.sysconf("SC_PAGE_SIZE") * os.sysconf("SC_PHYS_PAGES"))
+    except (ValueError, OSError, AttributeError):  # not on this platform: no check
+        return
+    if need > memory:
+        raise CommandError(
+            f"--duration {duration_s:g} s at --rate {rate_hz:g} /s is {samples:,} samples "
+            f"({need / 2**30:.3g} GiB with {parts} part(s)), more than this machine's memory "
+            f"({memory / 2**30:.3g} GiB): lower --rate or --duration"
+        )
+
+
 def simulate_with_progress(
     params: FeederParameters,
     duration_s: float,
@@ -291,8 +312,12 @@ def _concatenate(chunks: Sequence[SimulationResult]) -> SimulationResult:
 
 
 def run(args: argparse.Namespace) -> int:
+    check_output_file(args.output, "--output")
+    check_output_file(args.events, "--events")
+    check_output_dir(args.plot, "--plot")
     params, _, _ = plant_from_arguments(args)
     parts = default_parts(params, args.parts)
+    _check_sample_memory(args.duration, args.rate, len(parts))
     show = bool(args.progress) or (sys.stderr.isatty() and args.duration >= 10.0)
     progress = ProgressBar("simulating", args.duration, show)
     warmup = _warm_up(params)

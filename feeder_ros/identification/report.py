@@ -154,8 +154,8 @@ def write_model_file(path: Path, result: SweepResult, fits: Sequence[GroupFit]) 
 
 def summary(result: SweepResult, fits: Sequence[GroupFit], wall_s: float) -> str:
     lines = [
-        f"sweep: {len(result)} points, {result.ok_count} usable, source {result.source} "
-        f"({wall_s:.1f} s)"
+        f"sweep: {len(result)} point{'' if len(result) == 1 else 's'}, {result.ok_count} usable, "
+        f"source {result.source} ({wall_s:.1f} s)"
     ]
     if not fits:
         return "\n".join(lines)
