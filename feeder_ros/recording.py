@@ -25,6 +25,7 @@ from typing import Any
 import rclpy
 import yaml
 from rclpy.duration import Duration
+from rclpy.exceptions import InvalidNamespaceException, InvalidTopicNameException
 from rclpy.executors import ExternalShutdownException, SingleThreadedExecutor
 from rclpy.node import Node
 from rclpy.parameter import Parameter
@@ -35,6 +36,8 @@ from rclpy.qos import (
     ReliabilityPolicy,
 )
 from rclpy.topic_endpoint_info import TopicEndpointInfo
+from rclpy.validate_full_topic_name import validate_full_topic_name
+from rclpy.validate_namespace import validate_namespace
 
 from feeder_ros.bag import BagWriter
 from feeder_ros.bag.errors import BagError
@@ -71,6 +74,22 @@ class RecordingOptions:
     duration_s: float | None = None
     use_sim_time: bool = False
     discovery_period_s: float = 0.5
+
+    def __post_init__(self) -> None:
+        """Refuse (``ValueError`` naming the value) what cannot be recorded: names that are not
+        ROS names (nothing would ever match them), a duration that is not positive."""
+        try:
+            validate_namespace(_namespace(self.namespace))
+        except InvalidNamespaceException as error:
+            raise ValueError(f"namespace {self.namespace!r}: {error}") from None
+        for topic in self.topics:
+            full = topic if topic.startswith("/") else f"{_namespace(self.namespace)}/{topic}"
+            try:
+                validate_full_topic_name(full.replace("//", "/"))
+            except InvalidTopicNameException as error:
+                raise ValueError(f"topic {topic!r}: {error}") from None
+        if self.duration_s is not None and not self.duration_s > 0.0:
+            raise ValueError(f"duration_s={self.duration_s!r} must be > 0 (None: until Ctrl-C)")
 
 
 @dataclass

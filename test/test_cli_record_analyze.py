@@ -197,7 +197,10 @@ def test_duration_topic_list_and_sigterm(tmp_path: Path) -> None:
             assert reader.message_count == info.message_count
 
         process = subprocess.Popen(
-            [FEEDER, "record", "--namespace", ns, "-o", str(tmp_path / "term")],
+            # small chunks: the file grows within a second or two of recording, not after the
+            # ~10 s a default 1 MB chunk of these streams takes (on a loaded machine, more)
+            [FEEDER, "record", "--namespace", ns, "-o", str(tmp_path / "term"),
+             "--chunk-size", "32K"],
             stdout=subprocess.PIPE, stderr=subprocess.PIPE, text=True,
         )  # fmt: skip
         try:
@@ -324,6 +327,29 @@ def test_bench_bag_quick_run_writes_its_report(tmp_path: Path) -> None:
     ):
         assert row in text
     assert "| 6 | yes |" in text  # the sweep's six segments, estimator speeds as written
+
+
+@pytest.mark.parametrize(
+    ("args", "needle"),
+    [
+        (["bad_topic!"], "topic 'bad_topic!': Invalid topic name"),
+        (["--namespace", "bad ns"], "namespace 'bad ns': Invalid namespace"),
+        (["--duration", "0"], "argument --duration: '0' must be positive"),
+    ],
+)
+def test_record_refuses_names_that_are_not_ros_names_and_a_zero_duration(
+    tmp_path: Path, args: list[str], needle: str
+) -> None:
+    bag = tmp_path / "bag"
+    result = subprocess.run(
+        [FEEDER, "record", "-o", str(bag), "--duration", "2", *args],
+        capture_output=True,
+        text=True,
+        timeout=60,
+    )
+    assert result.returncode == 2, result.stdout + result.stderr
+    assert needle in result.stderr
+    assert not bag.exists()  # refused before the recorder started
 
 
 def test_record_refuses_an_existing_bag(tmp_path: Path) -> None:

@@ -12,6 +12,7 @@ import math
 import time
 from pathlib import Path
 
+from feeder_ros.cli.arguments import positive_float
 from feeder_ros.cli.main import CommandError
 
 __all__ = ["HELP", "add_arguments", "run"]
@@ -57,10 +58,17 @@ def add_arguments(parser: argparse.ArgumentParser) -> None:
         "-o", "--output", type=Path, help="bag directory to create (default: feeder_<date-time>)"
     )
     parser.add_argument(
-        "--compression", choices=("zstd", "lz4", "none"), default="zstd", help="(default zstd)"
+        "--compression",
+        choices=("zstd", "lz4", "none"),
+        default="zstd",
+        help="chunk compression (default zstd)",
     )
     parser.add_argument(
-        "--chunk-size", type=_size, default=1 << 20, metavar="BYTES", help="(default 1M)"
+        "--chunk-size",
+        type=_size,
+        default=1 << 20,
+        metavar="BYTES",
+        help="uncompressed bytes per chunk (default 1M)",
     )
     parser.add_argument(
         "--max-bag-size",
@@ -77,7 +85,10 @@ def add_arguments(parser: argparse.ArgumentParser) -> None:
         help="start a new file after this many seconds (0: never)",
     )
     parser.add_argument(
-        "--duration", type=_seconds, metavar="S", help="stop after this many seconds"
+        "--duration",
+        type=positive_float,
+        metavar="S",
+        help="stop after this many seconds, > 0 (default: until Ctrl-C)",
     )
     parser.add_argument(
         "--use-sim-time", action="store_true", help="log times from /clock instead of the wall"
