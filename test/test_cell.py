@@ -3,6 +3,7 @@
 from __future__ import annotations
 
 import os
+import shlex
 import signal
 import subprocess
 import sys
@@ -15,6 +16,7 @@ from stuck_code import TEARDOWN_TIMEOUT_TEXT, stuck_teardown_script
 
 from feeder_ros.cell import CellError, load_cell, parameters_document
 from feeder_ros.cli.cell import node_executables
+from feeder_ros.cli.main import main
 
 BIN = Path(sys.executable).parent
 CONFIG = Path(__file__).resolve().parents[1] / "config"
@@ -240,3 +242,30 @@ def test_cell_refuses_a_bad_description_before_starting_anything(tmp_path: Path)
     )
     assert result.returncode == 2
     assert "nodes.x: unknown node" in result.stderr
+
+
+def test_list_prints_command_lines_that_run_on_the_written_parameters(
+    tmp_path: Path, capsys: pytest.CaptureFixture[str]
+) -> None:
+    config = _two_feeders(tmp_path)
+    cell = load_cell(config, node_executables())
+    params = tmp_path / "cell_params.yaml"
+    assert main(["cell", "--config", str(config), "--list", "--params-out", str(params)]) == 0
+    lines = capsys.readouterr().out.splitlines()
+    assert len(lines) == len(cell.nodes)
+    for line, node in zip(lines, cell.nodes, strict=True):
+        command = shlex.split(line)
+        assert command == [str(node.executable), *node.ros_arguments(params)]
+    written = yaml.safe_load(params.read_text())
+    assert written == yaml.safe_load(parameters_document(cell))
+    assert set(written) == {node.fully_qualified_name for node in cell.nodes}
+
+    # without --params-out the file is printed after the commands, under the name they use
+    assert main(["cell", "--config", str(config), "--list"]) == 0
+    out = capsys.readouterr().out
+    commands, document = out.split("# parameters.yaml (save this as parameters.yaml", 1)
+    assert all(line.endswith("--params-file parameters.yaml") for line in commands.splitlines())
+    assert yaml.safe_load(document.split("\n", 1)[1]) == written
+
+    assert main(["cell", "--params-out", str(params)]) == 2
+    assert "--params-out goes with --list" in capsys.readouterr().err

@@ -3,6 +3,8 @@
 Each node runs as its own process, like a launch file (default), or all in one process
 (``--composed``). Ctrl-C or SIGTERM stops every node cleanly; a node that dies stops the cell;
 children also get SIGTERM if this process itself is killed, so no node is left orphaned.
+``--list`` prints each node's command line and the cell's parameter file instead (written to
+``--params-out FILE`` for the printed commands to use, or printed after them).
 """
 
 from __future__ import annotations
@@ -11,6 +13,7 @@ import argparse
 import ctypes
 import faulthandler
 import os
+import shlex
 import shutil
 import signal
 import subprocess
@@ -20,8 +23,10 @@ import time
 from pathlib import Path
 from typing import Any
 
+from feeder_ros.atomic_files import atomic_text
 from feeder_ros.cell import CellDescription, CellError, NodeLaunch, load_cell, parameters_document
 from feeder_ros.cli.main import CommandError
+from feeder_ros.cli.outputs import check_output_file
 
 HELP = "start a feeder cell (all its nodes) from a cell description; Ctrl-C stops it"
 CELL_FILE = "cell.yaml"
@@ -70,7 +75,15 @@ def add_arguments(parser: argparse.ArgumentParser) -> None:
         "--duration", type=float, help="stop after this many seconds (default: until Ctrl-C)"
     )
     parser.add_argument(
-        "--list", action="store_true", help="print the nodes and their command lines, then exit"
+        "--list",
+        action="store_true",
+        help="print each node's command line and the cell's parameters (YAML), then exit",
+    )
+    parser.add_argument(
+        "--params-out",
+        type=Path,
+        metavar="FILE",
+        help="--list: write the cell's parameters here, for the printed commands to use",
     )
 
 
@@ -180,23 +193,38 @@ def _spin_composed(
             node.destroy_node()
 
 
+def _list(cell: CellDescription, params_out: Path | None) -> None:
+    """The nodes' command lines, on ``params_out`` (written) or on ``parameters.yaml`` (printed
+    after them: save it under that name to run the commands)."""
+    document = parameters_document(cell)
+    target = params_out if params_out is not None else Path("parameters.yaml")
+    if params_out is not None:
+        with atomic_text(params_out) as stream:
+            stream.write(document)
+    for node in cell.nodes:
+        print(shlex.join([str(node.executable), *node.ros_arguments(target)]))
+    if params_out is None:
+        print(f"# {target} (save this as {target} to run the commands above):")
+        print(document, end="")
+
+
 def run(args: argparse.Namespace) -> int:
     path = args.config if args.config is not None else default_cell_path()
     if args.duration is not None and not args.duration > 0.0:
         raise CommandError(f"--duration {args.duration!r} must be > 0")
+    if args.params_out is not None and not args.list:
+        raise CommandError("--params-out goes with --list")
+    check_output_file(args.params_out, "--params-out")
     try:
         cell = load_cell(path, node_executables())
     except CellError as error:
         raise CommandError(str(error)) from None
+    if args.list:
+        _list(cell, args.params_out)
+        return 0
     with tempfile.TemporaryDirectory(prefix="feeder_cell_") as directory:
         parameters_file = Path(directory) / "parameters.yaml"
         parameters_file.write_text(parameters_document(cell), encoding="utf-8")
-        if args.list:
-            for node in cell.nodes:
-                command = [node.executable, *node.ros_arguments(parameters_file)]
-                print(" ".join(command))
-            print(parameters_file.read_text(encoding="utf-8"))
-            return 0
         os.environ.setdefault("ROS_AUTOMATIC_DISCOVERY_RANGE", "LOCALHOST")
         print(f"[cell] {cell.name}: {len(cell.nodes)} nodes in {len(cell.feeders)} feeder(s)")
         runner = run_composed if args.composed else run_processes
