@@ -120,6 +120,10 @@ def _section(path: Path, name: str, where: str) -> dict[str, Any]:
         raise CellError(f"{where}: cannot read params_file {path}: {error.strerror}") from None
     except yaml.YAMLError as error:
         raise CellError(f"{where}: params_file {path} is not valid YAML: {error}") from None
+    except UnicodeDecodeError as error:
+        raise CellError(
+            f"{where}: params_file {path} is not UTF-8 text ({error.reason} at byte {error.start})"
+        ) from None
     for key in (name, f"/{name}", f"/**/{name}"):
         if isinstance(document, Mapping) and key in document:
             section = document[key]
@@ -136,6 +140,8 @@ def load_cell(path: Path, known_executables: frozenset[str] | None = None) -> Ce
         raise CellError(f"cannot read cell description {path}: {error.strerror}") from None
     except yaml.YAMLError as error:
         raise CellError(f"{path}: not valid YAML: {error}") from None
+    except UnicodeDecodeError as error:
+        raise CellError(f"{path}: not UTF-8 text ({error.reason} at byte {error.start})") from None
     cell = _mapping(_mapping(document, str(path)).get("cell"), f"{path}: cell")
     name = cell.get("name", path.stem)
     use_sim_time = cell.get("use_sim_time", False)

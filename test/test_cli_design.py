@@ -115,7 +115,7 @@ def test_no_design_in_set_s_exits_1(tmp_path: Path, capsys: pytest.CaptureFixtur
         (["--objective", "min-force"], "--objective min-force needs --target-speed"),
         (["--target-speed", "0.01"], "--target-speed is for --objective min-force"),
         (["--set", "drive_frequency_hz=30"], "drive_frequency_hz is searched"),
-        (["--set", "static_friction=-1"], "static_friction=-1.0 1 must be > 0"),
+        (["--set", "static_friction=-1"], "static_friction=-1.0 must be > 0"),
         (["--preset", "gentle"], "presets in this file: realistic"),
         (["--space", "/nonexistent/design.yaml"], "--space /nonexistent/design.yaml: no such file"),
     ],

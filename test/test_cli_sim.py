@@ -133,6 +133,11 @@ def test_bad_config_files_are_refused(tmp_path: Path, capsys: pytest.CaptureFixt
     bad.write_text("other_node:\n  ros__parameters: {}\n")
     assert main(["sim", "--config", str(bad)]) == 2
     assert "ros__parameters" in capsys.readouterr().err
+    bad.write_bytes(b"platform_simulator:\n\x8d\xff")
+    assert main(["sim", "--config", str(bad)]) == 2
+    assert f"{bad}: not UTF-8 text (invalid start byte at byte 20)" in capsys.readouterr().err
+    assert main(["sim", "--set", "mass_coefficient=2"]) == 2  # a pure number: no unit named
+    assert "error: mass_coefficient=2.0 must be <= 1\n" in capsys.readouterr().err
     good = tmp_path / "good.yaml"
     good.write_text("platform_simulator:\n  ros__parameters:\n    drive_amplitude_n: 40.0\n")
     assert load_parameters(good, ["damping_ns_per_m=30"]) == FeederParameters(

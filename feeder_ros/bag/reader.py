@@ -108,7 +108,7 @@ class Bag:
             info = data["rosbag2_bagfile_information"]
             listed = [self.path / Path(p).name for p in info.get("relative_file_paths", [])]
             storage = info.get("storage_identifier", "")
-        except (OSError, yaml.YAMLError, KeyError, TypeError) as err:
+        except (OSError, ValueError, yaml.YAMLError, KeyError, TypeError) as err:
             self.report(
                 BagProblem(
                     "bad_metadata", meta_path, f"unreadable ({err}); using the .mcap files found"

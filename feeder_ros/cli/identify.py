@@ -78,7 +78,9 @@ def add_arguments(parser: argparse.ArgumentParser) -> None:
         metavar="INPUT",
         help="--source bag: bag directories or .mcap files; --source csv: one sweep.csv",
     )
-    parser.add_argument("--source", choices=SOURCES, default="sim", help="where points come from")
+    parser.add_argument(
+        "--source", choices=SOURCES, default="sim", help="where points come from (default sim)"
+    )
     parser.add_argument(
         "--plan", type=Path, metavar="YAML", help=f"sweep plan and fit settings ({PLAN_NAME})"
     )
@@ -91,25 +93,28 @@ def add_arguments(parser: argparse.ArgumentParser) -> None:
     group.add_argument("--amplitudes", metavar="LIST", help="percent of full scale, e.g. 35:47:2")
     group.add_argument("--masses", metavar="LIST", help="part masses in kg, e.g. 0.031,0.06")
     group.add_argument(
-        "--settle", type=non_negative_float, metavar="S", help="settle time per point"
+        "--settle", type=non_negative_float, metavar="S", help="settle time per point [s]"
     )
     group.add_argument(
-        "--window", type=positive_float, metavar="S", help="measurement window per point"
+        "--window", type=positive_float, metavar="S", help="measurement window per point [s]"
     )
     group.add_argument(
         "--distance",
         type=positive_float,
         metavar="M",
-        help="measure over this travel instead (0.085)",
+        help="measure over this travel instead [m] (the paper's 0.085)",
     )
     group.add_argument(
-        "--max-window", type=positive_float, metavar="S", help="distance mode: longest measurement"
+        "--max-window",
+        type=positive_float,
+        metavar="S",
+        help="distance mode: longest measurement [s]",
     )
     group.add_argument(
-        "--full-scale", type=positive_float, metavar="N", help="force at 100 %% amplitude"
+        "--full-scale", type=positive_float, metavar="NEWTON", help="force at 100 %% amplitude [N]"
     )
     group.add_argument(
-        "--ramp-time", type=non_negative_float, metavar="S", help="live: ramp per step"
+        "--ramp-time", type=non_negative_float, metavar="S", help="live: ramp per step [s]"
     )
     fit = parser.add_argument_group("fit")
     fit.add_argument(
@@ -163,6 +168,9 @@ def load_plan(args: argparse.Namespace) -> tuple[SweepPlan, FitSettings]:
         document = yaml.safe_load(path.read_text(encoding="utf-8"))
     except yaml.YAMLError as error:
         raise CommandError(f"{path}: not valid YAML: {error}") from None
+    except UnicodeDecodeError as error:
+        reason = f"not UTF-8 text ({error.reason} at byte {error.start})"
+        raise CommandError(f"{path}: {reason}") from None
     if not isinstance(document, dict) or not isinstance(document.get("sweep"), dict):
         raise CommandError(f"{path}: expected a 'sweep:' mapping (and optionally 'fit:')")
     unknown = sorted(str(k) for k in document if k not in ("sweep", "fit"))

@@ -92,6 +92,9 @@ def load_parameters(
         document = yaml.safe_load(path.read_text(encoding="utf-8"))
     except yaml.YAMLError as error:
         raise CommandError(f"{path}: not valid YAML: {error}") from None
+    except UnicodeDecodeError as error:
+        reason = f"not UTF-8 text ({error.reason} at byte {error.start})"
+        raise CommandError(f"{path}: {reason}") from None
     section: Any = None
     if isinstance(document, Mapping):
         keys: tuple[str, ...] = (node_name, f"/{node_name}", f"/**/{node_name}")
@@ -388,7 +391,7 @@ def summary(
         ]
     lines += [
         f"events: {len(result.event_t_s)}",
-        f"simulation wall time {wall_s:.3f} s, real-time factor "
+        f"simulation wall time {wall_s:.3g} s, real-time factor "
         f"{duration_s / wall_s if wall_s > 0 else math.inf:.1f}x"
         + (f" (after {warmup_s:.1f} s compiling the solver)" if warmup_s >= 0.5 else ""),
     ]

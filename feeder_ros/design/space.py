@@ -248,7 +248,13 @@ def load_design_config(path: Path) -> DesignConfig:
         document = yaml.safe_load(Path(path).read_text(encoding="utf-8"))
     except yaml.YAMLError as error:
         raise DesignError(f"{path}: not valid YAML: {error}") from None
+    except UnicodeDecodeError as error:
+        reason = f"not UTF-8 text ({error.reason} at byte {error.start})"
+        raise DesignError(f"{path}: {reason}") from None
     try:
         return DesignConfig.from_mapping(document, str(path))
     except DesignError as error:
-        raise DesignError(f"{path}: {error}") from None
+        message = str(error)  # the file named once
+        if not message.startswith(f"{path}:"):
+            message = f"{path}: {message}"
+        raise DesignError(message) from None

@@ -58,6 +58,11 @@ class ParameterSpec:
     read_only: bool = False  # fixed for the life of a running simulator node
     nan_allowed: bool = False  # for float: NaN means "not set" (e.g. no target speed)
 
+    @property
+    def _unit(self) -> str:
+        """The unit after a value in a message (none for a pure number, unit "1")."""
+        return "" if self.unit in ("", "1") else f" {self.unit}"
+
     def check(self, value: object) -> float | int | bool | str:
         """Return ``value`` converted to this parameter's type, or raise :class:`ParameterError`."""
         if self.kind is bool:
@@ -89,10 +94,10 @@ class ParameterSpec:
             if below:
                 relation = ">" if self.exclusive_minimum else ">="
                 raise ParameterError(
-                    f"{self.name}={value!r} {self.unit} must be {relation} {self.minimum:g}"
+                    f"{self.name}={value!r}{self._unit} must be {relation} {self.minimum:g}"
                 )
         if self.maximum is not None and number > self.maximum:
-            raise ParameterError(f"{self.name}={value!r} {self.unit} must be <= {self.maximum:g}")
+            raise ParameterError(f"{self.name}={value!r}{self._unit} must be <= {self.maximum:g}")
         return number
 
 

@@ -140,6 +140,14 @@ def test_missing_variables_and_bad_yaml(tmp_path: Path) -> None:
         load_design_config(_write(tmp_path, "conditions: {}\n"))
     with pytest.raises(DesignError, match="not valid YAML"):
         load_design_config(_write(tmp_path, "variables: [\n"))
+    path = _write(tmp_path, "")
+    with pytest.raises(DesignError) as empty:
+        load_design_config(path)
+    expected = f"{path}: expected sections variables, conditions, evaluation, reference"
+    assert str(empty.value) == expected  # the file named once
+    path.write_bytes(b"\xff\xfe")
+    with pytest.raises(DesignError, match=r"design.yaml: not UTF-8 text \(invalid start byte"):
+        load_design_config(path)
 
 
 def test_variable_refusals_directly() -> None:
