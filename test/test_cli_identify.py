@@ -163,6 +163,8 @@ def test_bad_data_is_refused_with_the_reason(
         (["--set", "damping_ns_per_m=-1"], "damping_ns_per_m"),
         (["--source", "live"], "2 part masses: a live sweep measures the parts that are on"),
         (["--source", "sim", "x.csv"], "--source sim takes no input files"),
+        (["--source", "sim", "--measure", "truth"], "--measure is for --source live (not sim)"),
+        (["--source", "csv", "x.csv", "--namespace", "/a"], "--namespace is for --source live"),
     ],
 )
 def test_bad_options_are_refused(

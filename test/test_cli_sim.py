@@ -151,3 +151,12 @@ def test_bad_options_are_refused(capsys: pytest.CaptureFixture[str]) -> None:
             main(["sim", *option])
         assert exit_info.value.code == 2
         assert option[1] in capsys.readouterr().err
+
+
+def test_an_unknown_option_is_named_by_the_sub_command(capsys: pytest.CaptureFixture[str]) -> None:
+    with pytest.raises(SystemExit) as exit_info:
+        main(["sim", "--duration", "1", "--bogus"])
+    assert exit_info.value.code == 2
+    err = capsys.readouterr().err
+    assert "usage: feeder sim" in err
+    assert "feeder sim: error: unrecognized arguments: --bogus" in err

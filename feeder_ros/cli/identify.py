@@ -134,9 +134,8 @@ def add_arguments(parser: argparse.ArgumentParser) -> None:
     live.add_argument(
         "--measure",
         choices=MEASURES,
-        default="sensors",
-        help="sensors: part-sensor transits (the paper's timing); monitor: the speed monitor's "
-        "estimated speed; truth: the simulator's part states",
+        help="sensors (default): part-sensor transits (the paper's timing); monitor: the speed "
+        "monitor's estimated speed; truth: the simulator's part states",
     )
     live.add_argument(
         "--use-sim-time",
@@ -292,7 +291,7 @@ def _sweep_live(args: argparse.Namespace, plan: SweepPlan, show: bool) -> SweepR
         return run_live_sweep(
             plan,
             namespace=args.namespace,
-            measure=args.measure,
+            measure=args.measure or "sensors",
             manage_lifecycle=not args.no_lifecycle,
             progress=lambda done, total: bar.update(done),
             log=lambda text: _note(text, bar),
@@ -365,6 +364,15 @@ def run(args: argparse.Namespace) -> int:
         raise CommandError("--model-out needs the fit (drop --no-fit)")
     if args.source in ("sim", "live") and args.inputs:
         raise CommandError(f"--source {args.source} takes no input files ({args.inputs[0]})")
+    if args.source != "live":
+        for flag, given in (
+            ("--namespace", bool(args.namespace)),
+            ("--measure", args.measure is not None),
+            ("--use-sim-time", args.use_sim_time),
+            ("--no-lifecycle", args.no_lifecycle),
+        ):
+            if given:
+                raise CommandError(f"{flag} is for --source live (not {args.source})")
     plan: SweepPlan | None = None
     plan, settings = load_plan(args)
     show = bool(args.progress) or sys.stderr.isatty()

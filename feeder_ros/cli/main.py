@@ -61,13 +61,15 @@ def build_parser() -> argparse.ArgumentParser:
             name, help=module.HELP, description=module.HELP, epilog=getattr(module, "EPILOG", None)
         )
         module.add_arguments(child)
-        child.set_defaults(_run=module.run)
+        child.set_defaults(_run=module.run, _parser=child)
     return parser
 
 
 def main(argv: Sequence[str] | None = None) -> int:
     parser = build_parser()
-    args = parser.parse_args(argv)
+    args, extra = parser.parse_known_args(argv)
+    if extra:  # said by the sub-command's parser: its usage and name, exit status 2
+        args._parser.error(f"unrecognized arguments: {' '.join(extra)}")
     try:
         return int(args._run(args))
     except KeyboardInterrupt:
