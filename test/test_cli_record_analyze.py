@@ -21,7 +21,7 @@ from typing import Any
 import numpy as np
 import pytest
 import yaml
-from bag.test_analysis import write_feeder_bag
+from bag.test_analysis import corrupt_middle_chunk, write_feeder_bag
 from mcap.reader import make_reader
 from mcap_ros2.decoder import DecoderFactory
 from rclpy.node import Node
@@ -281,16 +281,7 @@ def test_analyze_cli_reports_data_lost_to_a_corrupt_chunk(tmp_path: Path) -> Non
     """A corrupt chunk in the middle: the rest is analysed and written, but the loss is said (the
     counts and feed rates are short) and the exit status is 1."""
     write_feeder_bag(tmp_path / "bag", chunk_size=8192, extras=False)
-    mcap = tmp_path / "bag" / "bag_0.mcap"
-    with mcap.open("rb") as stream:
-        summary = make_reader(stream).get_summary()
-    assert summary is not None
-    chunks = sorted(summary.chunk_indexes, key=lambda c: c.chunk_start_offset)
-    middle = chunks[len(chunks) // 2]
-    data = bytearray(mcap.read_bytes())
-    at = middle.chunk_start_offset + middle.chunk_length // 2
-    data[at : at + 64] = bytes(64)
-    mcap.write_bytes(bytes(data))
+    middle = corrupt_middle_chunk(tmp_path / "bag" / "bag_0.mcap")
     out = tmp_path / "out"
     result = subprocess.run(
         [FEEDER, "analyze", str(tmp_path / "bag"), "--output", str(out)],

@@ -359,18 +359,24 @@ def test_truncated_file_gives_partial_results(tmp_path: Path) -> None:
     assert result.segments[0].speed_estimate_mps == pytest.approx(0.001)
 
 
-def test_corrupt_chunk_is_named_and_the_rest_analysed(tmp_path: Path) -> None:
-    write_feeder_bag(tmp_path / "bag", chunk_size=8192, extras=False)
-    mcap = tmp_path / "bag" / "bag_0.mcap"
+def corrupt_middle_chunk(mcap: Path) -> Any:
+    """Zero 64 bytes inside the compressed records of the file's middle chunk; its index entry
+    (offsets, log times) is returned."""
     with mcap.open("rb") as stream:
         summary = make_reader(stream).get_summary()
     assert summary is not None
     chunks = sorted(summary.chunk_indexes, key=lambda c: c.chunk_start_offset)
-    middle = chunks[len(chunks) // 2]  # zero 64 bytes inside its compressed records
+    middle = chunks[len(chunks) // 2]
     data = bytearray(mcap.read_bytes())
     at = middle.chunk_start_offset + middle.chunk_length // 2
     data[at : at + 64] = bytes(64)
     mcap.write_bytes(bytes(data))
+    return middle
+
+
+def test_corrupt_chunk_is_named_and_the_rest_analysed(tmp_path: Path) -> None:
+    write_feeder_bag(tmp_path / "bag", chunk_size=8192, extras=False)
+    middle = corrupt_middle_chunk(tmp_path / "bag" / "bag_0.mcap")
     result = analyze_bag(tmp_path / "bag")
     corrupt = [p for p in result.problems if p.startswith("[corrupt_chunk]")]
     assert len(corrupt) == 1
