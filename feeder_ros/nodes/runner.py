@@ -4,6 +4,7 @@ from __future__ import annotations
 
 import faulthandler
 import sys
+import time
 from collections.abc import Callable, Sequence
 from typing import Any
 
@@ -32,11 +33,27 @@ class StopOnShutdown:
     ``ExternalShutdownException``) and the ``RuntimeError`` rclpy raises when it takes a message
     that arrived while the context was shutting down are the stop that was asked for: they end
     the block quietly and set ``stopped``. Every other error propagates.
+
+    rclpy shuts the context down from its own signal thread, so a take can fail on the signal
+    (``RuntimeError: Unable to convert call argument '0' to Python object``, seen when a cell
+    stopped its nodes) a moment before ``context.ok()`` turns false: a ``RuntimeError`` is a stop
+    if the context goes down within ``shutdown_wait_s``.
     """
+
+    #: how long a RuntimeError waits for the context's shutdown to show [s]
+    shutdown_wait_s = 1.0
 
     def __init__(self, context: Context) -> None:
         self.context = context
         self.stopped = False
+
+    def _shutting_down(self) -> bool:
+        deadline = time.monotonic() + self.shutdown_wait_s
+        while self.context.ok():
+            if time.monotonic() >= deadline:
+                return False
+            time.sleep(0.005)
+        return True
 
     def __enter__(self) -> StopOnShutdown:
         return self
@@ -47,7 +64,7 @@ class StopOnShutdown:
         if kind is None:
             return False
         requested = issubclass(kind, KeyboardInterrupt | ExternalShutdownException) or (
-            issubclass(kind, RuntimeError) and not self.context.ok()
+            issubclass(kind, RuntimeError) and self._shutting_down()
         )
         self.stopped = requested
         return requested
