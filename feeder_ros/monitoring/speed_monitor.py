@@ -113,6 +113,11 @@ class SpeedMonitor:
         self.config = config if config is not None else MonitorConfig()
         self.reset()
 
+    def reconfigure(self, config: MonitorConfig) -> None:
+        """New limits from now on; the state (raised alarms, timers, the feed-rate history, the
+        target) is kept: a parameter change must not hide an alarm."""
+        self.config = config
+
     def reset(self) -> None:
         """Forget everything (also done when time jumps backwards)."""
         self._last_t = -math.inf
@@ -255,8 +260,11 @@ class SpeedMonitor:
             message = ", ".join(names)
         elif not self._driving:
             message = "idle"
+        elif math.isfinite(self._target):
+            # not "at target" before an estimate says so (sensor timeout raises after a while)
+            message = "at target" if fresh else "waiting for a speed estimate"
         else:
-            message = "at target" if math.isfinite(self._target) else "running (no target)"
+            message = "running (no target)"
         details = {
             "driving": str(self._driving).lower(),
             "speed_error_percent": (

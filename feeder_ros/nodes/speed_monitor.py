@@ -206,8 +206,8 @@ class SpeedMonitorNode(Node):
         for parameter in parameters:
             if parameter.name in PARAMETERS:
                 self._values[parameter.name] = parameter.value
-        with self._lock:  # new limits apply to fresh windows
-            self._monitor = SpeedMonitor(_config(self._values))
+        with self._lock:  # new limits from now on; raised alarms and the history are kept
+            self._monitor.reconfigure(_config(self._values))
 
     def _on_estimate(self, message: VehicleEstimate) -> None:
         with self._lock:

@@ -160,3 +160,28 @@ def test_bad_configuration_is_refused_with_the_value(
 def test_non_finite_time_is_refused() -> None:
     with pytest.raises(ParameterError, match="time nan"):
         SpeedMonitor().evaluate(math.nan)
+
+
+def test_no_at_target_before_an_estimate_says_so() -> None:
+    monitor = SpeedMonitor(MonitorConfig(sensor_timeout_s=2.0))
+    monitor.on_drive(0.0, True, TARGET)
+    status = monitor.evaluate(1.0)  # driving, no estimate yet: not "at target"
+    assert (status.level, status.alarms, status.message) == (0, 0, "waiting for a speed estimate")
+    assert _run(monitor, 1.1, 1.5, TARGET).message == "at target"
+    assert monitor.evaluate(4.0).alarms == Alarm.SENSOR_TIMEOUT  # estimates stopped
+
+
+def test_new_limits_keep_the_raised_alarms_and_the_history() -> None:
+    monitor = SpeedMonitor(MonitorConfig(speed_tolerance=0.15, alarm_delay_s=2.0, stall_time_s=3.0))
+    monitor.on_drive(0.0, True, TARGET)
+    for t in (0.5, 1.0, 1.5):
+        monitor.on_exit(t)
+    status = _run(monitor, 2.0, 6.0, 0.0)  # driving, parts not moving: a stall
+    assert status.alarms & Alarm.STALL
+    assert status.level == 2
+    monitor.reconfigure(MonitorConfig(speed_tolerance=0.3, alarm_delay_s=2.0, stall_time_s=3.0))
+    again = monitor.evaluate(6.05)
+    assert again.alarms & Alarm.STALL  # still raised: the stall timer was kept
+    assert again.feed_rate_ppm == pytest.approx(3 * 60.0 / 6.05)  # the 3 exits still counted
+    assert again.target_speed_mps == TARGET
+    assert monitor.config.speed_tolerance == 0.3

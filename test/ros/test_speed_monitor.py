@@ -8,8 +8,11 @@ import time
 from pathlib import Path
 
 from diagnostic_msgs.msg import DiagnosticArray, DiagnosticStatus
+from rcl_interfaces.msg import Parameter as ParameterMsg
+from rcl_interfaces.msg import ParameterType, ParameterValue
+from rcl_interfaces.srv import SetParameters
 from rclpy.qos import QoSProfile, ReliabilityPolicy
-from ros_test_tools import probe_node, running, wait_until
+from ros_test_tools import call, probe_node, running, wait_until
 
 from feeder_ros.msg import DriveCommand, PartSensorEvent, SpeedStatus, VehicleEstimate
 
@@ -63,6 +66,16 @@ def test_stall_and_starvation_are_raised_and_cleared() -> None:
             ]
             assert own
             assert own[-1].level == DiagnosticStatus.ERROR
+            # a parameter change (new limits) keeps the raised alarm: nothing is hidden
+            value = ParameterValue(type=ParameterType.PARAMETER_DOUBLE, double_value=0.2)
+            request = SetParameters.Request(
+                parameters=[ParameterMsg(name="speed_tolerance", value=value)]
+            )
+            answer = call(node, SetParameters, f"{ns}/speed_monitor/set_parameters", request)
+            assert answer.results[0].successful, answer.results[0].reason
+            after = len(statuses)
+            assert wait_until(lambda: len(statuses) >= after + 3, 5.0)
+            assert all(s.alarms & SpeedStatus.ALARM_STALL for s in statuses[after:])
             # parts move at the target: the stall clears
             speed["value"] = 0.01
             assert wait_until(lambda: not alarm(SpeedStatus.ALARM_STALL), 5.0)
