@@ -186,6 +186,7 @@ class DriveInterface(LifecycleNode):
         self._controller: DriveController | None = None
         self._backend: DriveBackend | None = None
         self._backend_fault = ""
+        self._logged_fault = ""  # the latched fault reason last logged (each new one is logged)
         self._speed_source = "none"
         self._command_pub: Any = None
         self._loop_timers: list[Any] = []
@@ -419,6 +420,19 @@ class DriveInterface(LifecycleNode):
                 self.get_logger().info("backend fault cleared (reset_fault to resume)")
         self._run_tracker(controller, now)
         output = controller.tick(now, self._period_s)
+        if controller.fault_reason != self._logged_fault:
+            # every fault latched here (the heartbeat watchdog, ...) is logged once; a backend
+            # fault and an e-stop are logged where they arrive
+            if (
+                controller.fault_reason
+                and controller.state == DriveState.FAULT
+                and not controller.fault_reason.startswith("backend: ")
+            ):
+                self.get_logger().error(
+                    f"output off, fault latched: {controller.fault_reason} "
+                    "(reset_fault, then start, to resume)"
+                )
+            self._logged_fault = controller.fault_reason
         backend.write(output)
         self._last_output = output
         self._publish_state(controller, output)

@@ -19,8 +19,8 @@ import yaml
 from diagnostic_msgs.msg import DiagnosticArray, DiagnosticStatus
 from lifecycle_msgs.msg import Transition
 from lifecycle_msgs.srv import ChangeState, GetState
+from rcl_interfaces.msg import Log, ParameterType, ParameterValue
 from rcl_interfaces.msg import Parameter as ParameterMsg
-from rcl_interfaces.msg import ParameterType, ParameterValue
 from rcl_interfaces.srv import GetParameters, SetParameters
 from rclpy.node import Node
 from rclpy.qos import QoSProfile, ReliabilityPolicy
@@ -395,6 +395,8 @@ def test_ramps_stop_estop_and_deactivate_on_the_wire() -> None:
 def test_watchdog_trips_within_its_timeout_and_ramps_to_zero() -> None:
     ns = "/drive_watchdog"
     with drive_node(ns, *FAST, "heartbeat_timeout_s:=1.5") as cell:
+        logs: list[Log] = []
+        cell.probe.create_subscription(Log, "/rosout", logs.append, RELIABLE)
         cell.bring_up()
         cell.start_heartbeat()
         assert wait_until(lambda: not math.isnan(cell.last_beat_s), 5.0)
@@ -408,6 +410,18 @@ def test_watchdog_trips_within_its_timeout_and_ramps_to_zero() -> None:
         fault = cell.wait_state(DriveState.STATE_FAULT, timeout_s=10.0)
         assert "heartbeat lost" in fault.fault_reason
         assert "timeout 1.5 s" in fault.fault_reason
+
+        def logged() -> list[Log]:  # the trip is logged once, as an error, by the node
+            return [
+                entry
+                for entry in list(logs)
+                if entry.name == f"{ns[1:]}.drive_interface"
+                and "fault latched: heartbeat lost" in entry.msg
+            ]
+
+        assert wait_until(lambda: bool(logged()), 5.0), [e.msg for e in logs]
+        time.sleep(0.5)
+        assert [entry.level for entry in logged()] == [Log.ERROR]
         first_fault = next(
             s for s in cell.states_since(last_beat) if s.state == DriveState.STATE_FAULT
         )
