@@ -374,25 +374,37 @@ class PlatformSimulator(Node):
         return response
 
     # -- the loop ------------------------------------------------------------------------------
-    def _target_time(self) -> float:
-        factor = float(self._values["real_time_factor"])
-        step = float(self._values["max_step_s"])
-        if factor == 0.0:
-            return self._sim.time_s + step
+    def _schedule_time(self) -> float:
+        """Where the paced simulation should be now (simulated time)."""
         elapsed = self._wall.now().nanoseconds * 1e-9 - self._pace_wall_s
-        target = self._pace_sim_s + elapsed * factor
-        # never run ahead by more than max_step_s in one tick (after a stall, catch up in steps)
-        return min(target, self._sim.time_s + step)
+        return self._pace_sim_s + elapsed * float(self._values["real_time_factor"])
+
+    def _target_time(self) -> float:
+        step = float(self._values["max_step_s"])
+        if self._values["real_time_factor"] == 0.0:
+            return self._sim.time_s + step
+        # never more than max_step_s in one step (after a stall, catch up in steps)
+        return min(self._schedule_time(), self._sim.time_s + step)
+
+    def _behind(self) -> bool:
+        """Whether the paced schedule is a whole step (max_step_s) or more ahead: a step was cut
+        short by max_step_s, not one that merely trails the clock by the time it took."""
+        with self._lock:
+            ahead = self._schedule_time() - self._sim.time_s
+            return ahead >= float(self._values["max_step_s"])
 
     def _tick(self) -> None:
-        """One timer tick: catch up with the schedule; unpaced, step until the tick's time is up
-        (then return, so services and parameter changes are served between ticks)."""
+        """One timer tick: steps of at most max_step_s until the schedule is caught up (paced)
+        or the tick's time is up (unpaced), then return, so that services and parameter changes
+        are served between ticks. A tick is not limited to one step: a real_time_factor above
+        max_step_s / tick_period_s (5 with the defaults) is reached too."""
         started = time.perf_counter()
         budget = 0.8 * float(self._values["tick_period_s"])
         while True:
             self._step()
-            unpaced = self._values["real_time_factor"] == 0.0
-            if not unpaced or time.perf_counter() - started > budget:
+            if time.perf_counter() - started > budget:
+                return
+            if self._values["real_time_factor"] != 0.0 and not self._behind():
                 return
 
     def _step(self) -> None:

@@ -48,7 +48,12 @@ NODE_PARAMETERS: dict[str, ParameterSpec] = {
             maximum=1000.0,
         ),
         ParameterSpec(
-            "max_step_s", float, "s", "simulated time per tick when unpaced", 0.001, 10.0
+            "max_step_s",
+            float,
+            "s",
+            "largest simulated step (a tick takes as many as the pace needs)",
+            0.001,
+            10.0,
         ),
         ParameterSpec(
             "command_timeout_s",

@@ -200,3 +200,24 @@ def test_sim_time_mode_publishes_clock_faster_than_real_time() -> None:
         times = [Time.from_msg(c.clock).nanoseconds for c in clocks]
         assert times == sorted(times)
     assert process.returncode == 0
+
+
+def test_a_paced_factor_above_max_step_over_tick_is_reached() -> None:
+    """10x real time with the default tick (10 ms) and step (50 ms): several steps per tick (one
+    step per tick capped the pace at 5x)."""
+    ns = "/sim_paced"
+    command = [
+        SIMULATOR, "--ros-args", "-r", f"__ns:={ns}", "-p", "use_sim_time:=true",
+        "-p", "real_time_factor:=10.0", "-p", "imu_rate_hz:=100.0", "-p", "state_rate_hz:=50.0",
+    ]  # fmt: skip
+    with running(command) as process, probe_node() as node:
+        clocks: list[ClockMessage] = []
+        node.create_subscription(ClockMessage, "/clock", clocks.append, 1000)
+        assert wait_until(lambda: len(clocks) > 20, 20.0)
+        time.sleep(0.5)
+        wall_start, sim_start = time.monotonic(), Time.from_msg(clocks[-1].clock).nanoseconds
+        time.sleep(3.0)
+        wall = time.monotonic() - wall_start
+        simulated = (Time.from_msg(clocks[-1].clock).nanoseconds - sim_start) * 1e-9
+        assert 8.0 < simulated / wall < 12.0, f"{simulated / wall:.2f}x real time, asked 10x"
+    assert process.returncode == 0
