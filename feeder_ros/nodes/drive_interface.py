@@ -27,6 +27,7 @@ from pathlib import Path
 from typing import Any
 
 from diagnostic_msgs.msg import DiagnosticArray, DiagnosticStatus, KeyValue
+from rcl_interfaces.msg import SetParametersResult
 from rclpy.duration import Duration
 from rclpy.exceptions import InvalidTopicNameException
 from rclpy.expand_topic_name import expand_topic_name
@@ -54,6 +55,7 @@ from feeder_ros.msg import DriveCommand, SpeedStatus, VehicleEstimate
 from feeder_ros.msg import DriveState as DriveStateMsg
 from feeder_ros.node_interfaces import NodeInterface, ServiceSpec, TopicSpec
 from feeder_ros.nodes.drive_interface_parameters import (
+    AT_CONFIGURE,
     DEFAULTS,
     LIMIT_PARAMETERS,
     PARAMETERS,
@@ -75,7 +77,8 @@ INTERFACE = NodeInterface(
     executable="drive_interface",
     node_name="drive_interface",
     summary="managed (lifecycle) drive-command interface for the cell controller: limits, soft "
-    "ramps, heartbeat watchdog, e-stop, target-speed mode; sim or Modbus TCP backend",
+    "ramps, heartbeat watchdog, e-stop, target-speed mode; sim or Modbus TCP backend. Parameters "
+    "read at configure are set while it is unconfigured (refused later)",
     publishes=(
         TopicSpec(
             "drive/state",
@@ -181,6 +184,7 @@ class DriveInterface(LifecycleNode):
         self.add_on_set_parameters_callback(
             validator(PARAMETERS, check_all=check_combination, current=lambda: self._values)
         )
+        self.add_on_set_parameters_callback(self._refuse_configure_time_changes)
         self.add_post_set_parameters_callback(self._apply_parameters)
 
         self._controller: DriveController | None = None
@@ -213,6 +217,23 @@ class DriveInterface(LifecycleNode):
     # -- time and parameters -------------------------------------------------------------------
     def _now(self) -> float:
         return float(self.get_clock().now().nanoseconds) * 1e-9
+
+    def _refuse_configure_time_changes(
+        self, parameters: list[Parameter[Any]]
+    ) -> SetParametersResult:
+        """A parameter read at configure changes only while the node is unconfigured: changed
+        later, it would not act until the next configure, while drive/state and the diagnostics
+        already reported it (a backend, a feedback topic that is not the one in use)."""
+        if self._controller is None:
+            return SetParametersResult(successful=True)
+        for parameter in parameters:
+            if parameter.name in AT_CONFIGURE and parameter.value != self._values[parameter.name]:
+                return SetParametersResult(
+                    successful=False,
+                    reason=f"{parameter.name} is read at configure: deactivate and clean up the "
+                    "node (unconfigured), set it, then configure again",
+                )
+        return SetParametersResult(successful=True)
 
     def _apply_parameters(self, parameters: list[Parameter[Any]]) -> None:
         changed = {p.name for p in parameters if p.name in PARAMETERS}

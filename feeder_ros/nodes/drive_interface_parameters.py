@@ -341,6 +341,10 @@ PARAMETERS: dict[str, ParameterSpec] = {
     spec.name: spec
     for spec in (*LIMIT_PARAMETERS, *NODE_PARAMETERS, *TRACKING_PARAMETERS, *PLANT_PARAMETERS)
 }
+#: parameters the node reads when it is configured: changed only while it is unconfigured
+AT_CONFIGURE = frozenset(
+    name for name, spec in PARAMETERS.items() if spec.description.endswith(_AT_CONFIGURE)
+)
 _MAP = RegisterMap()
 _MODBUS = ModbusSettings()
 _TRACKER = TrackerSettings()

@@ -154,6 +154,10 @@ class Cell:
         )
         return call(self.probe, SetDrive, f"{self.ns}/set_drive", request)
 
+    def set_parameter(self, name: str, value: ParameterValue) -> Any:
+        request = SetParameters.Request(parameters=[ParameterMsg(name=name, value=value)])
+        return call(self.probe, SetParameters, f"{self.ns}/{NODE}/set_parameters", request)
+
     def set_speed(self, speed: float, ramp: float = 0.0) -> SetTargetSpeed.Response:
         request = SetTargetSpeed.Request(speed_mps=speed, ramp_time_s=ramp)
         return call(self.probe, SetTargetSpeed, f"{self.ns}/set_target_speed", request)
@@ -178,6 +182,14 @@ def drive_node(namespace: str, *params: str, params_file: Path | None = None) ->
         )
         assert visible, process.poll()
         yield cell
+
+
+def double(value: float) -> ParameterValue:
+    return ParameterValue(type=ParameterType.PARAMETER_DOUBLE, double_value=value)
+
+
+def text(value: str) -> ParameterValue:
+    return ParameterValue(type=ParameterType.PARAMETER_STRING, string_value=value)
 
 
 def _amplitudes(commands: Sequence[DriveCommand]) -> list[float]:
@@ -266,21 +278,14 @@ def test_unconfigured_node_refuses_and_parameters_are_validated() -> None:
         assert not cell.trigger("start").success
         assert cell.set_speed(0.01).result == SetTargetSpeed.Response.REFUSED
 
-        def set_parameter(name: str, value: ParameterValue) -> Any:
-            request = SetParameters.Request(parameters=[ParameterMsg(name=name, value=value)])
-            return call(cell.probe, SetParameters, f"{ns}/{NODE}/set_parameters", request)
-
-        def double(value: float) -> ParameterValue:
-            return ParameterValue(type=ParameterType.PARAMETER_DOUBLE, double_value=value)
-
-        refused = set_parameter("min_frequency_hz", double(400.0)).results[0]
+        refused = cell.set_parameter("min_frequency_hz", double(400.0)).results[0]
         assert not refused.successful
         assert "must be below max_frequency_hz=300" in refused.reason
         bands = ParameterValue(type=ParameterType.PARAMETER_STRING, string_value="40, 50, 60")
-        refused = set_parameter("forbidden_bands_hz", bands).results[0]
+        refused = cell.set_parameter("forbidden_bands_hz", bands).results[0]
         assert not refused.successful
         assert "pairs" in refused.reason
-        assert set_parameter("max_frequency_hz", double(200.0)).results[0].successful
+        assert cell.set_parameter("max_frequency_hz", double(200.0)).results[0].successful
 
 
 def test_ramps_stop_estop_and_deactivate_on_the_wire() -> None:
@@ -381,10 +386,18 @@ def test_ramps_stop_estop_and_deactivate_on_the_wire() -> None:
         refused = cell.trigger("start")
         assert not refused.success
         assert "not active" in refused.message
+        # what is read at configure stays as configured until cleanup (the same value passes)
+        answer = cell.set_parameter("backend", text("modbus_tcp")).results[0]
+        assert not answer.successful
+        assert "backend is read at configure: deactivate and clean up" in answer.reason
+        assert cell.set_parameter("backend", text("sim")).results[0].successful
+        assert not cell.set_parameter("publish_rate_hz", double(20.0)).results[0].successful
+        assert cell.set_parameter("max_amplitude_percent", double(90.0)).results[0].successful
 
         # cleanup: the backend is gone; drive/command and drive/state fall silent
         assert cell.transition(Transition.TRANSITION_CLEANUP)
         assert cell.lifecycle_state() == "unconfigured"
+        assert cell.set_parameter("publish_rate_hz", double(20.0)).results[0].successful
         time.sleep(0.5)
         count = len(cell.commands)
         time.sleep(1.0)
