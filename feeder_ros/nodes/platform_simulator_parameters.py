@@ -43,7 +43,8 @@ NODE_PARAMETERS: dict[str, ParameterSpec] = {
             "real_time_factor",
             float,
             "1",
-            "simulated seconds per wall second; 0: as fast as possible (needs use_sim_time)",
+            "simulated seconds per wall second; 0: as fast as possible (needs use_sim_time; "
+            "too fast for a live drive interface, whose commands arrive stale)",
             minimum=0.0,
             maximum=1000.0,
         ),
