@@ -32,6 +32,8 @@ from typing import Any
 
 import yaml
 
+from feeder_ros.yaml_files import YamlFileError, read_yaml
+
 __all__ = [
     "CellDescription",
     "CellError",
@@ -115,15 +117,11 @@ def _flatten(values: Mapping[str, Any], prefix: str = "") -> dict[str, Any]:
 def _section(path: Path, name: str, where: str) -> dict[str, Any]:
     """The ros__parameters of node section ``name`` of a ROS parameter file, flattened."""
     try:
-        document = yaml.safe_load(path.read_text(encoding="utf-8"))
+        document = read_yaml(path)
     except OSError as error:
         raise CellError(f"{where}: cannot read params_file {path}: {error.strerror}") from None
-    except yaml.YAMLError as error:
-        raise CellError(f"{where}: params_file {path} is not valid YAML: {error}") from None
-    except UnicodeDecodeError as error:
-        raise CellError(
-            f"{where}: params_file {path} is not UTF-8 text ({error.reason} at byte {error.start})"
-        ) from None
+    except YamlFileError as error:
+        raise CellError(f"{where}: params_file {error}") from None
     for key in (name, f"/{name}", f"/**/{name}"):
         if isinstance(document, Mapping) and key in document:
             section = document[key]
@@ -135,13 +133,11 @@ def _section(path: Path, name: str, where: str) -> dict[str, Any]:
 def load_cell(path: Path, known_executables: frozenset[str] | None = None) -> CellDescription:
     """Parse and check a cell description; ``known_executables`` limits the node names."""
     try:
-        document = yaml.safe_load(path.read_text(encoding="utf-8"))
+        document = read_yaml(path)
     except OSError as error:
         raise CellError(f"cannot read cell description {path}: {error.strerror}") from None
-    except yaml.YAMLError as error:
-        raise CellError(f"{path}: not valid YAML: {error}") from None
-    except UnicodeDecodeError as error:
-        raise CellError(f"{path}: not UTF-8 text ({error.reason} at byte {error.start})") from None
+    except YamlFileError as error:
+        raise CellError(str(error)) from None
     cell = _mapping(_mapping(document, str(path)).get("cell"), f"{path}: cell")
     name = cell.get("name", path.stem)
     use_sim_time = cell.get("use_sim_time", False)

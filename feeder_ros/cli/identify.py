@@ -27,8 +27,6 @@ import time
 from pathlib import Path
 from typing import TYPE_CHECKING, Any
 
-import yaml
-
 from feeder_ros.cli.arguments import non_negative_float, positive_float
 from feeder_ros.cli.main import CommandError
 from feeder_ros.cli.outputs import check_output_dir, check_output_file
@@ -49,6 +47,7 @@ from feeder_ros.identification.sweep import (
     parse_orders,
     parse_values,
 )
+from feeder_ros.yaml_files import YamlFileError, read_yaml
 
 if TYPE_CHECKING:
     pass
@@ -164,12 +163,9 @@ def load_plan(args: argparse.Namespace) -> tuple[SweepPlan, FitSettings]:
     if not path.is_file():
         raise CommandError(f"--plan {path}: no such file")
     try:
-        document = yaml.safe_load(path.read_text(encoding="utf-8"))
-    except yaml.YAMLError as error:
-        raise CommandError(f"{path}: not valid YAML: {error}") from None
-    except UnicodeDecodeError as error:
-        reason = f"not UTF-8 text ({error.reason} at byte {error.start})"
-        raise CommandError(f"{path}: {reason}") from None
+        document = read_yaml(path)
+    except YamlFileError as error:
+        raise CommandError(str(error)) from None
     if not isinstance(document, dict) or not isinstance(document.get("sweep"), dict):
         raise CommandError(f"{path}: expected a 'sweep:' mapping (and optionally 'fit:')")
     unknown = sorted(str(k) for k in document if k not in ("sweep", "fit"))

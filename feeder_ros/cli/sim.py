@@ -21,7 +21,6 @@ from pathlib import Path
 from typing import TYPE_CHECKING, Any, TextIO
 
 import numpy as np
-import yaml
 
 from feeder_ros.atomic_files import atomic_text
 from feeder_ros.cli.arguments import non_negative_int, positive_float
@@ -30,6 +29,7 @@ from feeder_ros.cli.outputs import check_output_dir, check_output_file
 from feeder_ros.cli.progress import ProgressBar
 from feeder_ros.nodes.platform_simulator_parameters import NODE_PARAMETERS
 from feeder_ros.physics.parameters import FeederParameters, ParameterError, parse_parameter_value
+from feeder_ros.yaml_files import YamlFileError, read_yaml
 
 if TYPE_CHECKING:
     from feeder_ros.physics.simulation import PartSpec, SimulationResult
@@ -89,12 +89,9 @@ def load_parameters(
     """
     node_name = NODE_NAME if preset is None else f"{NODE_NAME}_{preset}"
     try:
-        document = yaml.safe_load(path.read_text(encoding="utf-8"))
-    except yaml.YAMLError as error:
-        raise CommandError(f"{path}: not valid YAML: {error}") from None
-    except UnicodeDecodeError as error:
-        reason = f"not UTF-8 text ({error.reason} at byte {error.start})"
-        raise CommandError(f"{path}: {reason}") from None
+        document = read_yaml(path)
+    except YamlFileError as error:
+        raise CommandError(str(error)) from None
     section: Any = None
     if isinstance(document, Mapping):
         keys: tuple[str, ...] = (node_name, f"/{node_name}", f"/**/{node_name}")

@@ -25,10 +25,10 @@ from typing import Any
 
 import numpy as np
 import numpy.typing as npt
-import yaml
 
 from feeder_ros.design.stick_slip_conditions import ConditionLimits, EvaluationWindow
 from feeder_ros.physics.parameters import PARAMETER_SPECS, FeederParameters, ParameterError
+from feeder_ros.yaml_files import YamlFileError, read_yaml
 
 __all__ = [
     "DESIGN_VARIABLES",
@@ -245,12 +245,9 @@ def _settings(kind: type[Any], values: object, section: str) -> Any:
 def load_design_config(path: Path) -> DesignConfig:
     """Read a design file; errors name the file, the key and the value."""
     try:
-        document = yaml.safe_load(Path(path).read_text(encoding="utf-8"))
-    except yaml.YAMLError as error:
-        raise DesignError(f"{path}: not valid YAML: {error}") from None
-    except UnicodeDecodeError as error:
-        reason = f"not UTF-8 text ({error.reason} at byte {error.start})"
-        raise DesignError(f"{path}: {reason}") from None
+        document = read_yaml(path)
+    except YamlFileError as error:
+        raise DesignError(str(error)) from None
     try:
         return DesignConfig.from_mapping(document, str(path))
     except DesignError as error:

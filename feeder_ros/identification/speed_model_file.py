@@ -42,6 +42,7 @@ from feeder_ros.identification.rational_fit import (
     RationalModel,
     _real,
 )
+from feeder_ros.yaml_files import YamlFileError, read_yaml
 
 __all__ = [
     "FORMAT",
@@ -262,13 +263,11 @@ def load_speed_model(path: Path) -> SpeedModelFile:
     unstable pole, inconsistent force, ...)."""
     path = Path(path)
     try:
-        text = path.read_text(encoding="utf-8")
-    except (OSError, UnicodeDecodeError) as exc:
+        document = read_yaml(path)
+    except OSError as exc:
         raise IdentificationError(f"{path}: cannot read the speed model: {exc}") from None
-    try:
-        document = yaml.safe_load(text)
-    except yaml.YAMLError as exc:
-        raise IdentificationError(f"{path}: not valid YAML: {exc}") from None
+    except YamlFileError as exc:
+        raise IdentificationError(str(exc)) from None
     try:
         return _from_document(document)
     except IdentificationError as exc:
