@@ -602,8 +602,10 @@ def _cell(fa, fb, da, db, ca, cb, B, B3, h, tol, dtol):
     if fa <= tol:  # released at a
         if not da > dtol:
             return CELL_UNSURE
-        if fb > tol and (convex or concave):
-            return CELL_NONE  # rising from a: convex keeps rising, concave stays above the chord
+        if fb > tol and (convex or concave or (db > 0.0 and da + db > B * h)):
+            # rising from a: convex keeps rising, concave stays above the chord, a slope that
+            # stays positive keeps rising
+            return CELL_NONE
         if fb < -tol and concave:
             return CELL_ROOT  # up from a, down through the one root of a concave function
         return CELL_UNSURE

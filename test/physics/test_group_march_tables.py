@@ -123,6 +123,23 @@ def test_cell_classification_agrees_with_dense_sampling() -> None:
     assert min(seen.values()) > 50, seen
 
 
+def test_cell_passes_a_released_function_whose_slope_stays_positive() -> None:
+    """Released at the cell's start and rising all through it (the slope bound from both ends
+    stays positive) while its curvature changes sign: no root, decided on the end values alone
+    instead of halving the cell."""
+    coef = (0.1, 3.0, 0.7, 1.0, -0.1 * np.sin(0.7))  # f' = 1 + 0.3*cos(...) >= 0.7
+    h = 1.0
+    args = [0.0, float(_wave(coef, h, 0))]
+    args += [float(_wave(coef, x, 1)) for x in (0.0, h)]
+    args += [float(_wave(coef, x, 2)) for x in (0.0, h)]
+    B, B3 = 0.1 * 3.0**2, 0.1 * 3.0**3
+    assert abs(args[4] + args[5]) < B3 * h  # neither convex nor concave on the cell
+    assert k._cell(*args, B, B3, h, 1e-14, 1e-10) == k.CELL_NONE
+    assert np.all(_wave(coef, np.linspace(0.0, h, 1001)[1:], 0) > 0.0)
+    # a slope that may turn negative inside the cell is still undecided
+    assert k._cell(*args, 4.0, B3, h, 1e-14, 1e-10) == k.CELL_UNSURE
+
+
 def _expand_reference(
     ev_t: np.ndarray,
     ev_kind: np.ndarray,
