@@ -61,12 +61,14 @@ class MonitorConfig:
     speed_tolerance: float = 0.15  #: relative speed error that raises under/overspeed
     clear_ratio: float = 0.6  #: the alarm clears below speed_tolerance * clear_ratio
     alarm_delay_s: float = 2.0  #: a speed error must last this long to raise
-    min_confidence: float = 0.5  #: estimates below this confidence are not used
+    min_confidence: float = 0.5  #: estimates below this confidence give no speed
     stall_speed_mps: float = 0.5e-3  #: driving with |speed| below this is a stall ...
     stall_time_s: float = 3.0  #: ... for this long
     starvation_time_s: float = 30.0  #: driving and no part seen for this long
     track_full_time_s: float = 10.0  #: a part-present sensor covered this long
-    sensor_timeout_s: float = 2.0  #: no estimate for this long while driving
+    #: no estimate message for this long while driving is a sensor timeout (ERROR); estimates
+    #: that keep coming below min_confidence this long are a WARN (no speed to check)
+    sensor_timeout_s: float = 2.0
     feed_window_s: float = 60.0  #: window of the feed rate
     transit_pair: tuple[int, int] = (0, 1)  #: sensor indices timed for the transit speed
     transit_distance_m: float = 0.085  #: distance between those sensors
@@ -126,6 +128,9 @@ class SpeedMonitor:
         self._target = math.nan
         self._speed = math.nan
         self._speed_t = -math.inf
+        self._heard_t = -math.inf  # the last estimate message, whatever its confidence
+        self._heard_confidence = math.nan
+        self._heard_finite = False
         self._speed_error_since = math.nan
         self._speed_alarm = 0
         self._slow_since = math.nan
@@ -160,7 +165,12 @@ class SpeedMonitor:
         self._target = target_speed_mps
 
     def on_estimate(self, t: float, mean_speed_mps: float, confidence: float) -> None:
+        """An estimate message: its speed counts when it is finite and at least
+        ``min_confidence`` sure; any message shows that the estimator is alive."""
         self._advance(t)
+        self._heard_t = t
+        self._heard_confidence = confidence
+        self._heard_finite = math.isfinite(mean_speed_mps)
         if math.isfinite(mean_speed_mps) and confidence >= self.config.min_confidence:
             self._speed = mean_speed_mps
             self._speed_t = t
@@ -216,7 +226,11 @@ class SpeedMonitor:
         alarms = 0
         fresh = t - self._speed_t <= cfg.sensor_timeout_s
         speed = self._speed if fresh else math.nan
-        if self._driving and driving_for > cfg.sensor_timeout_s and not fresh:
+        # the estimate stream went silent; estimates that keep coming without the confidence to
+        # use them are a warning below (the estimator is alive, e.g. settling after a start)
+        heard = t - self._heard_t <= cfg.sensor_timeout_s
+        unsure = self._driving and driving_for > cfg.sensor_timeout_s and not fresh
+        if unsure and not heard:
             alarms |= Alarm.SENSOR_TIMEOUT
 
         # stall: driving but the part does not move
@@ -258,6 +272,15 @@ class SpeedMonitor:
         names = [name for bit, name in ALARM_NAMES.items() if alarms & bit]
         if names:
             message = ", ".join(names)
+        elif unsure:
+            level = WARN
+            why = (
+                f"confidence {self._heard_confidence:.2f} < {cfg.min_confidence:.2f}"
+                if self._heard_finite
+                else "no speed in it"
+            )
+            since = t - max(self._speed_t, self._driving_since)
+            message = f"no confident speed estimate for {since:.1f} s ({why})"
         elif not self._driving:
             message = "idle"
         elif math.isfinite(self._target):
@@ -276,6 +299,7 @@ class SpeedMonitor:
                 f"{t - self._last_part_t:.1f}" if math.isfinite(self._last_part_t) else "nan"
             ),
             "time_jumps_back": str(self.time_jumps),
+            "last_estimate_confidence": f"{self._heard_confidence:.3f}",
         }
         return MonitorStatus(
             t_s=t,

@@ -39,7 +39,11 @@ _TIMES = (
     ("stall_time_s", "driving with no part motion this long is a stall"),
     ("starvation_time_s", "driving and no part seen this long is starvation"),
     ("track_full_time_s", "a part-present sensor covered this long means the track is full"),
-    ("sensor_timeout_s", "no estimate this long while driving is a sensor timeout"),
+    (
+        "sensor_timeout_s",
+        "no estimate this long while driving is a sensor timeout (ERROR); estimates that keep "
+        "coming below min_confidence this long are a WARN",
+    ),
     ("feed_window_s", "window of the feed rate"),
 )
 PARAMETERS: dict[str, ParameterSpec] = {
@@ -73,7 +77,12 @@ PARAMETERS: dict[str, ParameterSpec] = {
             exclusive_minimum=True,
         ),
         ParameterSpec(
-            "min_confidence", float, "1", "estimates below this confidence are ignored", 0.0, 1.0
+            "min_confidence",
+            float,
+            "1",
+            "estimates below this confidence give no speed (the estimator counts as alive)",
+            0.0,
+            1.0,
         ),
         *(
             ParameterSpec(name, float, "s", text, minimum=0.0, exclusive_minimum=True)

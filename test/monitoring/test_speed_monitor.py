@@ -94,9 +94,38 @@ def test_sensor_timeout_when_estimates_stop() -> None:
     status = monitor.evaluate(5.5)
     assert status.alarms == Alarm.SENSOR_TIMEOUT
     assert math.isnan(status.estimated_speed_mps)
-    # low-confidence estimates do not count as fresh
+    # an estimate below min_confidence gives no speed, but the estimator is alive: a warning,
+    # not a sensor timeout
     monitor.on_estimate(5.6, 0.01, 0.1)
-    assert monitor.evaluate(5.7).alarms == Alarm.SENSOR_TIMEOUT
+    status = monitor.evaluate(5.7)
+    assert (status.level, status.alarms) == (1, 0)
+    assert status.message == "no confident speed estimate for 2.7 s (confidence 0.10 < 0.50)"
+    assert math.isnan(status.estimated_speed_mps)
+    # silent again for sensor_timeout_s: the timeout is back
+    assert monitor.evaluate(7.5).alarms == 0
+    assert monitor.evaluate(7.7).alarms == Alarm.SENSOR_TIMEOUT
+
+
+def test_an_estimator_settling_after_a_start_is_a_warning_not_a_sensor_timeout() -> None:
+    """After a (re)start the estimator keeps publishing, below min_confidence while its window
+    still holds the ramp: the monitor warns that it has no speed to check, raises no alarm, and
+    is at target again once an estimate is sure enough."""
+    monitor = SpeedMonitor(MonitorConfig(sensor_timeout_s=2.0, min_confidence=0.5))
+    monitor.on_drive(0.0, True, TARGET)
+    levels = []
+    for i in range(40):
+        t = i / 10
+        monitor.on_estimate(t, 0.3 * TARGET, 0.2)
+        status = monitor.evaluate(t)
+        levels.append((t, status.level, status.alarms))
+    assert all(alarms == 0 for _, _, alarms in levels)
+    assert {level for t, level, _ in levels if t <= 2.0} == {0}
+    assert {level for t, level, _ in levels if t >= 2.1} == {1}
+    assert status.message == "no confident speed estimate for 3.9 s (confidence 0.20 < 0.50)"
+    monitor.on_estimate(4.0, math.nan, 0.9)  # sure of nothing: still no speed
+    assert monitor.evaluate(4.0).message == "no confident speed estimate for 4.0 s (no speed in it)"
+    status = _run(monitor, 4.1, 4.5, TARGET)
+    assert (status.level, status.alarms, status.message) == (0, 0, "at target")
 
 
 def test_transit_speed_by_part_id_and_first_in_first_out() -> None:
