@@ -107,7 +107,18 @@ PARAMETERS: dict[str, ParameterSpec] = {
                 "input_timeout_s",
                 float,
                 "s",
-                "no sample for this long is a sensor timeout (diagnostics ERROR)",
+                "no sample for this long once samples came is a sensor timeout (diagnostics ERROR)",
+                minimum=0.0,
+                exclusive_minimum=True,
+            ),
+            # bring-up is not a steady stream: the sensor's node or driver may start seconds
+            # after this one (a cell's processes load at once; the simulator loads its solver)
+            ParameterSpec(
+                "startup_timeout_s",
+                float,
+                "s",
+                "no first sample this long after the start is a sensor error (diagnostics "
+                "ERROR; WARN while waiting)",
                 minimum=0.0,
                 exclusive_minimum=True,
             ),
@@ -126,6 +137,7 @@ DEFAULTS: dict[str, Any] = {
     "imu_axis": "x",
     "use_carrier_state": False,
     "input_timeout_s": 1.0,
+    "startup_timeout_s": 10.0,
 }
 SENSOR_QOS = QoSProfile(depth=500, reliability=ReliabilityPolicy.BEST_EFFORT)
 RELIABLE_QOS = QoSProfile(depth=1000, reliability=ReliabilityPolicy.RELIABLE)
@@ -442,15 +454,16 @@ class VehicleEstimatorNode(Node):
             record = self._record
             silent_s = (self.get_clock().now() - self._last_input).nanoseconds * 1e-9
             received = self._received
-        if silent_s > self._values["input_timeout_s"]:
+        if received == 0:
+            if silent_s > self._values["startup_timeout_s"]:
+                level = DiagnosticStatus.ERROR
+                text = f"no accelerometer sample in {silent_s:.1f} s since start"
+            else:
+                level = DiagnosticStatus.WARN
+                text = f"waiting for the first accelerometer sample ({silent_s:.1f} s since start)"
+        elif silent_s > self._values["input_timeout_s"]:
             level = DiagnosticStatus.ERROR
-            text = (
-                f"sensor timeout: no accelerometer sample for {silent_s:.1f} s"
-                if received
-                else f"no accelerometer sample in {silent_s:.1f} s since start"
-            )
-        elif received == 0:
-            level, text = DiagnosticStatus.WARN, "waiting for the first accelerometer sample"
+            text = f"sensor timeout: no accelerometer sample for {silent_s:.1f} s"
         elif record.status in _WARN_STATUSES:
             level, text = DiagnosticStatus.WARN, record.status_message or record.status.name
         else:

@@ -165,6 +165,7 @@ def test_bad_samples_are_reported_not_averaged_in() -> None:
     command = [
         str(BIN / "vehicle_estimator"), "--ros-args", "-r", f"__ns:={ns}",
         "-p", f"qos_overrides.{ns}/imu.subscription.reliability:=reliable",
+        "-p", "startup_timeout_s:=4.0",
     ]  # fmt: skip
     with running(command), probe_node() as node:
         estimates: list[VehicleEstimate] = []
@@ -185,15 +186,32 @@ def test_bad_samples_are_reported_not_averaged_in() -> None:
                         return status
             return None
 
-        # no sample for longer than input_timeout_s (1 s) since start: a sensor error
+        # no first sample: waiting (WARN) while within startup_timeout_s (4 s here), although
+        # that is longer than input_timeout_s (1 s); after it, a sensor error
         def missing_sensor() -> bool:
             status = own_status()
             return status is not None and status.level == DiagnosticStatus.ERROR
 
-        assert wait_until(missing_sensor, 10.0)
-        missing = own_status()
-        assert missing is not None
-        assert "no accelerometer sample" in missing.message
+        assert wait_until(missing_sensor, 15.0)
+        seen = [
+            (s.level, s.message)
+            for array in diagnostics
+            for s in array.status
+            if s.name == f"{ns}/vehicle_estimator: estimate"
+        ]
+        first_error = next(
+            i for i, (level, _) in enumerate(seen) if level == DiagnosticStatus.ERROR
+        )
+        waiting = seen[:first_error]
+        assert waiting, seen
+        for level, text in waiting:
+            assert level == DiagnosticStatus.WARN, seen
+            assert text.startswith("waiting for the first accelerometer sample ("), seen
+        assert max(float(text.split("(")[1].split()[0]) for _, text in waiting) > 1.0, seen
+        error = seen[first_error][1]
+        assert error.startswith("no accelerometer sample in ")
+        assert error.endswith(" since start")
+        assert float(error.split()[4]) >= 4.0  # printed to 0.1 s
 
         t0 = 1000.0
         command = DriveCommand(enabled=True, frequency_hz=25.0, amplitude_n=40.0)
