@@ -56,7 +56,9 @@ class Recording:
     drive: list[tuple[float, int, float, float, float]] = field(default_factory=list)
     parts: list[tuple[float, dict[int, float]]] = field(default_factory=list)
     exits: list[float] = field(default_factory=list)
+    #: the worst level per diagnostic status name, and the message it first came with
     diagnostics: dict[str, int] = field(default_factory=dict)
+    diagnostic_messages: dict[str, str] = field(default_factory=dict)
     #: diagnostics count while the cell runs: its nodes' last statuses while they stop one after
     #: the other (an estimator whose simulator is gone times out) are not the demo's findings
     collecting_diagnostics: bool = True
@@ -64,6 +66,12 @@ class Recording:
 
     def now(self) -> float:
         return time.time()
+
+    def note_diagnostic(self, name: str, level: int, message: str) -> None:
+        """Keep a status's worst level and the message it first came with (under ``lock``)."""
+        if self.collecting_diagnostics and level > self.diagnostics.get(name, -1):
+            self.diagnostics[name] = level
+            self.diagnostic_messages[name] = message
 
     def add(self, callback: Callable[[Any], None]) -> Callable[[Any], None]:
         def locked(message: Any) -> None:
@@ -106,11 +114,9 @@ def _probe(namespace: str, recording: Recording) -> tuple[Context, Any, threadin
         r.exits.append(r.now())
 
     def on_diagnostics(m: DiagnosticArray) -> None:
-        if not r.collecting_diagnostics:
-            return
         for status in m.status:
             level = status.level[0] if isinstance(status.level, bytes) else int(status.level)
-            r.diagnostics[status.name] = max(r.diagnostics.get(status.name, 0), level)
+            r.note_diagnostic(status.name, level, status.message)
 
     subscribe = node.create_subscription
     subscribe(VehicleEstimate, f"{namespace}/estimate", r.add(on_estimate), RELIABLE)
@@ -164,10 +170,44 @@ def summarise(recording: Recording, timeline: list[dict[str, Any]], out: Path) -
         "diagnostics": {
             name: LEVELS[min(level, 3)] for name, level in recording.diagnostics.items()
         },
+        "diagnostic_messages": dict(recording.diagnostic_messages),
         "controller_steps": timeline,
     }
     (out / "summary.json").write_text(json.dumps(summary, indent=2) + "\n")
     return summary
+
+
+def problems(
+    summary: dict[str, Any], controller_code: int, cell_code: int, expected_error: str
+) -> list[str]:
+    """Why the demo did not show a working cell (empty: it did).
+
+    The cell works when the controller and the cell exit cleanly, the speed monitor judges every
+    target-speed phase OK with an estimate in it, parts leave the track, the watchdog trips when
+    the controller's heartbeat stops, and no node reports ERROR (or STALE) except
+    ``expected_error``, the drive interface's status that the watchdog trip raises."""
+    found = []
+    if controller_code != 0:
+        found.append(f"the cell controller exited with status {controller_code}")
+    if cell_code != 0:
+        found.append(f"the cell (feeder cell) exited with status {cell_code}")
+    if not summary["phases"]:
+        found.append("no target-speed phase was recorded (the controller never watched a speed)")
+    for phase in summary["phases"]:
+        where = f"phase ending at {phase['at_s']:g} s (target {phase['target_mm_s']} mm/s)"
+        if phase["estimated_mm_s"] is None:
+            found.append(f"{where}: no speed estimate")
+        if not str(phase["monitor"]).startswith("OK "):
+            found.append(f"{where}: the speed monitor said {phase['monitor']}")
+    if summary["parts_fed"] == 0:
+        found.append("no part left the track")
+    if summary["watchdog"].get("tripped") is not True:
+        found.append("the watchdog did not trip when the controller's heartbeat stopped")
+    messages = summary.get("diagnostic_messages", {})
+    for name, level in sorted(summary["diagnostics"].items()):
+        if level in ("ERROR", "STALE") and name != expected_error:
+            found.append(f"{level} from {name}: {messages.get(name, '')}")
+    return found
 
 
 def plot(recording: Recording, out: Path) -> list[Path]:
@@ -274,12 +314,20 @@ def main(argv: list[str] | None = None) -> int:
     print(f"parts fed: {summary['parts_fed']}")
     print("diagnostics seen until the cell stopped (worst level per status):")
     for name, level in sorted(summary["diagnostics"].items()):
-        print(f"  {level:5} {name}")
+        message = summary["diagnostic_messages"].get(name, "")
+        print(f"  {level:5} {name}" + (f" ({message})" if message and level != "OK" else ""))
     print(f"plots: {', '.join(str(p) for p in plots)}; data: {args.output / 'summary.json'}")
     print(f"demo took {time.monotonic() - started:.0f} s")
-    ok = controller.returncode == 0 and cell_code == 0 and bool(summary["phases"])
-    print("DEMO OK" if ok else "DEMO FAILED")
-    return 0 if ok else 1
+    found = problems(
+        summary, controller.returncode, cell_code, f"{args.namespace}/drive_interface: drive"
+    )
+    if found:
+        print("DEMO FAILED: the cell did not work as the demo expects:")
+        for problem in found:
+            print(f"  - {problem}")
+        return 1
+    print("DEMO OK")
+    return 0
 
 
 if __name__ == "__main__":

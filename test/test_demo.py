@@ -1,0 +1,131 @@
+"""`make demo`'s verdict: DEMO OK only for a cell that did what the demo shows."""
+
+from __future__ import annotations
+
+import json
+from pathlib import Path
+from typing import Any
+
+from feeder_ros.demo import Recording, problems, summarise
+
+NS = "/demo_cell/feeder_1"
+DRIVE = f"{NS}/drive_interface: drive"
+ESTIMATE = f"{NS}/vehicle_estimator: estimate"
+MONITOR = f"{NS}/speed_monitor: part speed"
+
+
+def _status(wall_s: float, target: float, estimate: float | None, level: str, message: str) -> Any:
+    return {
+        "t_s": wall_s,
+        "wall_s": wall_s,
+        "step": "speed status",
+        "target_mm_s": target,
+        "estimated_mm_s": estimate,
+        "transit_mm_s": estimate,
+        "feed_rate_ppm": 15.0,
+        "level": level,
+        "message": message,
+    }
+
+
+def _run(
+    tmp_path: Path,
+    estimates: tuple[float | None, float | None] = (15.3, 8.2),
+    monitor: tuple[tuple[str, str], ...] = (("OK", "at target"), ("OK", "at target")),
+    tripped: bool = True,
+    exits: int = 3,
+    diagnostics: tuple[tuple[str, int, str], ...] = (),
+) -> dict[str, Any]:
+    recording = Recording(start=1000.0)
+    recording.exits = [1010.0 + k for k in range(exits)]
+    for name, level, message in (
+        (DRIVE, 0, "running"),
+        (DRIVE, 2, "fault: heartbeat lost: none for 2.01 s (timeout 2 s)"),
+        (DRIVE, 2, "fault: still latched"),
+        (DRIVE, 0, "running"),
+        (ESTIMATE, 1, "waiting for the first accelerometer sample (0.9 s since start)"),
+        (ESTIMATE, 0, "estimating"),
+        *diagnostics,
+    ):
+        recording.note_diagnostic(name, level, message)
+    timeline = [
+        _status(1019.6, 15.0, estimates[0], *monitor[0]),
+        _status(1031.6, 8.0, estimates[1], *monitor[1]),
+        {"step": "watchdog", "wall_s": 1033.0, "tripped": tripped, "state": "fault"},
+    ]
+    return summarise(recording, timeline, tmp_path)
+
+
+def test_a_working_cell_passes_and_its_summary_keeps_the_worst_messages(tmp_path: Path) -> None:
+    summary = _run(tmp_path)
+    assert problems(summary, 0, 0, DRIVE) == []
+    written = json.loads((tmp_path / "summary.json").read_text())
+    assert written["diagnostics"] == {DRIVE: "ERROR", ESTIMATE: "WARN"}
+    # the message that came with the worst level first, not a later one at that level
+    assert written["diagnostic_messages"] == {
+        DRIVE: "fault: heartbeat lost: none for 2.01 s (timeout 2 s)",
+        ESTIMATE: "waiting for the first accelerometer sample (0.9 s since start)",
+    }
+
+
+def test_a_cell_whose_simulator_never_came_up_fails_with_every_reason(tmp_path: Path) -> None:
+    # what a run looked like whose simulator was still compiling its solver: the controller
+    # drove, nothing moved, the estimator and monitor raised errors; the old verdict said OK
+    summary = _run(
+        tmp_path,
+        estimates=(None, None),
+        monitor=(("ERROR", "sensor timeout"), ("ERROR", "starvation, sensor timeout")),
+        exits=0,
+        diagnostics=(
+            (ESTIMATE, 2, "no accelerometer sample in 10.2 s since start"),
+            (MONITOR, 2, "sensor timeout"),
+            (MONITOR, 2, "starvation, sensor timeout"),
+        ),
+    )
+    assert problems(summary, 0, 0, DRIVE) == [
+        "phase ending at 19.6 s (target 15.0 mm/s): no speed estimate",
+        "phase ending at 19.6 s (target 15.0 mm/s): the speed monitor said ERROR sensor timeout",
+        "phase ending at 31.6 s (target 8.0 mm/s): no speed estimate",
+        "phase ending at 31.6 s (target 8.0 mm/s): the speed monitor said ERROR starvation, "
+        "sensor timeout",
+        "no part left the track",
+        f"ERROR from {MONITOR}: sensor timeout",
+        f"ERROR from {ESTIMATE}: no accelerometer sample in 10.2 s since start",
+    ]
+
+
+def test_each_missing_piece_is_named_alone(tmp_path: Path) -> None:
+    assert problems(_run(tmp_path, tripped=False), 0, 0, DRIVE) == [
+        "the watchdog did not trip when the controller's heartbeat stopped"
+    ]
+    slow = _run(tmp_path, monitor=(("OK", "at target"), ("WARN", "below target: 6.1 mm/s")))
+    assert problems(slow, 0, 0, DRIVE) == [
+        "phase ending at 31.6 s (target 8.0 mm/s): the speed monitor said WARN below target: "
+        "6.1 mm/s"
+    ]
+    assert problems(_run(tmp_path), 1, -2, DRIVE) == [
+        "the cell controller exited with status 1",
+        "the cell (feeder cell) exited with status -2",
+    ]
+    stale = _run(tmp_path, diagnostics=((f"{NS}/platform_simulator: simulation", 3, "stale"),))
+    assert problems(stale, 0, 0, DRIVE) == [
+        f"STALE from {NS}/platform_simulator: simulation: stale"
+    ]
+    # the drive interface's ERROR is the demo's own watchdog trip only under its expected name
+    assert problems(_run(tmp_path), 0, 0, "/other/drive_interface: drive") == [
+        f"ERROR from {DRIVE}: fault: heartbeat lost: none for 2.01 s (timeout 2 s)"
+    ]
+    assert problems(summarise(Recording(), [], tmp_path), 0, 0, DRIVE) == [
+        "no target-speed phase was recorded (the controller never watched a speed)",
+        "no part left the track",
+        "the watchdog did not trip when the controller's heartbeat stopped",
+    ]
+
+
+def test_diagnostics_after_the_cell_is_told_to_stop_are_not_kept() -> None:
+    recording = Recording()
+    recording.note_diagnostic(ESTIMATE, 0, "estimating")
+    recording.collecting_diagnostics = False
+    recording.note_diagnostic(ESTIMATE, 2, "sensor timeout: no accelerometer sample for 1.2 s")
+    assert recording.diagnostics == {ESTIMATE: 0}
+    assert recording.diagnostic_messages == {ESTIMATE: "estimating"}
