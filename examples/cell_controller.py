@@ -3,7 +3,8 @@
 
 What a pick-and-place cell's PLC or orchestrator does with a feeder, as a small rclpy program:
 
-1. bring the drive interface up (lifecycle configure + activate) and send a heartbeat;
+1. bring the drive interface up (lifecycle configure + activate) and send a heartbeat; wait until
+   the feeder's sensors are live (its estimator publishes: the accelerometer stream is up);
 2. start the feeder and ask for a part speed (``set_target_speed``), then watch ``speed/status``;
 3. change the speed;
 4. go silent for longer than the watchdog timeout (as a crashed controller would): the drive
@@ -36,7 +37,7 @@ from rclpy.qos import QoSProfile, ReliabilityPolicy
 from std_msgs.msg import Header
 from std_srvs.srv import Trigger
 
-from feeder_ros.msg import DriveState, SpeedStatus
+from feeder_ros.msg import DriveState, SpeedStatus, VehicleEstimate
 from feeder_ros.srv import SetTargetSpeed
 
 RELIABLE = QoSProfile(depth=10, reliability=ReliabilityPolicy.RELIABLE)
@@ -50,9 +51,11 @@ class CellController(Node):
         self.heartbeat_on = True
         self.drive_state: DriveState | None = None
         self.speed_status: SpeedStatus | None = None
+        self.estimates = 0
         self._heartbeat = self.create_publisher(Header, "heartbeat", RELIABLE)
         self.create_subscription(DriveState, "drive/state", self._on_drive_state, RELIABLE)
         self.create_subscription(SpeedStatus, "speed/status", self._on_speed_status, RELIABLE)
+        self.create_subscription(VehicleEstimate, "estimate", self._on_estimate, RELIABLE)
         self.create_timer(0.2, self._beat)
         self._start_time = time.monotonic()
 
@@ -69,6 +72,9 @@ class CellController(Node):
 
     def _on_speed_status(self, message: SpeedStatus) -> None:
         self.speed_status = message
+
+    def _on_estimate(self, message: VehicleEstimate) -> None:
+        self.estimates += 1
 
     # -- helpers -------------------------------------------------------------------------------
     def log(self, step: str, **details: Any) -> None:
@@ -187,6 +193,11 @@ class CellController(Node):
         self.bring_up()
         if not self.wait_for("drive state", lambda: self.drive_state is not None, 30.0):
             return 1
+        # driving a feeder whose sensors are not up yet would be driving blind (a cell's nodes
+        # start together; the simulator loads its solver first, a real sensor's driver boots)
+        if not self.wait_for("the feeder's estimate stream", lambda: self.estimates > 0, 120.0):
+            return 1
+        self.log("feeder sensors live")
         self.target_speed(first_mps)
         self.start()
         self.watch_speed(hold_s)
