@@ -56,9 +56,11 @@ class Recording:
     drive: list[tuple[float, int, float, float, float]] = field(default_factory=list)
     parts: list[tuple[float, dict[int, float]]] = field(default_factory=list)
     exits: list[float] = field(default_factory=list)
-    #: the worst level per diagnostic status name, and the message it first came with
+    #: the worst level per diagnostic status name, and the message and time (system clock) it
+    #: first came with
     diagnostics: dict[str, int] = field(default_factory=dict)
     diagnostic_messages: dict[str, str] = field(default_factory=dict)
+    diagnostic_times: dict[str, float] = field(default_factory=dict)
     #: diagnostics count while the cell runs: its nodes' last statuses while they stop one after
     #: the other (an estimator whose simulator is gone times out) are not the demo's findings
     collecting_diagnostics: bool = True
@@ -67,11 +69,13 @@ class Recording:
     def now(self) -> float:
         return time.time()
 
-    def note_diagnostic(self, name: str, level: int, message: str) -> None:
-        """Keep a status's worst level and the message it first came with (under ``lock``)."""
+    def note_diagnostic(self, name: str, level: int, message: str, t: float) -> None:
+        """Keep a status's worst level and the message and time ``t`` it first came with (under
+        ``lock``)."""
         if self.collecting_diagnostics and level > self.diagnostics.get(name, -1):
             self.diagnostics[name] = level
             self.diagnostic_messages[name] = message
+            self.diagnostic_times[name] = t
 
     def add(self, callback: Callable[[Any], None]) -> Callable[[Any], None]:
         def locked(message: Any) -> None:
@@ -116,7 +120,7 @@ def _probe(namespace: str, recording: Recording) -> tuple[Context, Any, threadin
     def on_diagnostics(m: DiagnosticArray) -> None:
         for status in m.status:
             level = status.level[0] if isinstance(status.level, bytes) else int(status.level)
-            r.note_diagnostic(status.name, level, status.message)
+            r.note_diagnostic(status.name, level, status.message, r.now())
 
     subscribe = node.create_subscription
     subscribe(VehicleEstimate, f"{namespace}/estimate", r.add(on_estimate), RELIABLE)
@@ -171,6 +175,9 @@ def summarise(recording: Recording, timeline: list[dict[str, Any]], out: Path) -
             name: LEVELS[min(level, 3)] for name, level in recording.diagnostics.items()
         },
         "diagnostic_messages": dict(recording.diagnostic_messages),
+        "diagnostic_at_s": {
+            name: round(t - recording.start, 1) for name, t in recording.diagnostic_times.items()
+        },
         "controller_steps": timeline,
     }
     (out / "summary.json").write_text(json.dumps(summary, indent=2) + "\n")
@@ -204,9 +211,11 @@ def problems(
     if summary["watchdog"].get("tripped") is not True:
         found.append("the watchdog did not trip when the controller's heartbeat stopped")
     messages = summary.get("diagnostic_messages", {})
+    times = summary.get("diagnostic_at_s", {})
     for name, level in sorted(summary["diagnostics"].items()):
         if level in ("ERROR", "STALE") and name != expected_error:
-            found.append(f"{level} from {name}: {messages.get(name, '')}")
+            at = f" at {times[name]:g} s" if name in times else ""
+            found.append(f"{level} from {name}{at}: {messages.get(name, '')}")
     return found
 
 
@@ -315,7 +324,9 @@ def main(argv: list[str] | None = None) -> int:
     print("diagnostics seen until the cell stopped (worst level per status):")
     for name, level in sorted(summary["diagnostics"].items()):
         message = summary["diagnostic_messages"].get(name, "")
-        print(f"  {level:5} {name}" + (f" ({message})" if message and level != "OK" else ""))
+        at = summary["diagnostic_at_s"].get(name)
+        detail = f" ({message}; first at {at:g} s)" if level != "OK" and at is not None else ""
+        print(f"  {level:5} {name}{detail}")
     print(f"plots: {', '.join(str(p) for p in plots)}; data: {args.output / 'summary.json'}")
     print(f"demo took {time.monotonic() - started:.0f} s")
     found = problems(

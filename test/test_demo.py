@@ -38,6 +38,7 @@ def _run(
 ) -> dict[str, Any]:
     recording = Recording(start=1000.0)
     recording.exits = [1010.0 + k for k in range(exits)]
+    seen: list[str] = []  # statuses noted so far: the k-th at 5 + k s
     for name, level, message in (
         (DRIVE, 0, "running"),
         (DRIVE, 2, "fault: heartbeat lost: none for 2.01 s (timeout 2 s)"),
@@ -47,7 +48,8 @@ def _run(
         (ESTIMATE, 0, "estimating"),
         *diagnostics,
     ):
-        recording.note_diagnostic(name, level, message)
+        recording.note_diagnostic(name, level, message, recording.start + 5.0 + len(seen))
+        seen.append(name)
     timeline = [
         _status(1019.6, 15.0, estimates[0], *monitor[0]),
         _status(1031.6, 8.0, estimates[1], *monitor[1]),
@@ -66,6 +68,7 @@ def test_a_working_cell_passes_and_its_summary_keeps_the_worst_messages(tmp_path
         DRIVE: "fault: heartbeat lost: none for 2.01 s (timeout 2 s)",
         ESTIMATE: "waiting for the first accelerometer sample (0.9 s since start)",
     }
+    assert written["diagnostic_at_s"] == {DRIVE: 6.0, ESTIMATE: 9.0}  # since the demo's start
 
 
 def test_a_cell_whose_simulator_never_came_up_fails_with_every_reason(tmp_path: Path) -> None:
@@ -89,8 +92,8 @@ def test_a_cell_whose_simulator_never_came_up_fails_with_every_reason(tmp_path: 
         "phase ending at 31.6 s (target 8.0 mm/s): the speed monitor said ERROR starvation, "
         "sensor timeout",
         "no part left the track",
-        f"ERROR from {MONITOR}: sensor timeout",
-        f"ERROR from {ESTIMATE}: no accelerometer sample in 10.2 s since start",
+        f"ERROR from {MONITOR} at 12 s: sensor timeout",
+        f"ERROR from {ESTIMATE} at 11 s: no accelerometer sample in 10.2 s since start",
     ]
 
 
@@ -109,11 +112,11 @@ def test_each_missing_piece_is_named_alone(tmp_path: Path) -> None:
     ]
     stale = _run(tmp_path, diagnostics=((f"{NS}/platform_simulator: simulation", 3, "stale"),))
     assert problems(stale, 0, 0, DRIVE) == [
-        f"STALE from {NS}/platform_simulator: simulation: stale"
+        f"STALE from {NS}/platform_simulator: simulation at 11 s: stale"
     ]
     # the drive interface's ERROR is the demo's own watchdog trip only under its expected name
     assert problems(_run(tmp_path), 0, 0, "/other/drive_interface: drive") == [
-        f"ERROR from {DRIVE}: fault: heartbeat lost: none for 2.01 s (timeout 2 s)"
+        f"ERROR from {DRIVE} at 6 s: fault: heartbeat lost: none for 2.01 s (timeout 2 s)"
     ]
     assert problems(summarise(Recording(), [], tmp_path), 0, 0, DRIVE) == [
         "no target-speed phase was recorded (the controller never watched a speed)",
@@ -124,8 +127,8 @@ def test_each_missing_piece_is_named_alone(tmp_path: Path) -> None:
 
 def test_diagnostics_after_the_cell_is_told_to_stop_are_not_kept() -> None:
     recording = Recording()
-    recording.note_diagnostic(ESTIMATE, 0, "estimating")
+    recording.note_diagnostic(ESTIMATE, 0, "estimating", 1.0)
     recording.collecting_diagnostics = False
-    recording.note_diagnostic(ESTIMATE, 2, "sensor timeout: no accelerometer sample for 1.2 s")
+    recording.note_diagnostic(ESTIMATE, 2, "sensor timeout: no accelerometer sample for 1.2 s", 2.0)
     assert recording.diagnostics == {ESTIMATE: 0}
     assert recording.diagnostic_messages == {ESTIMATE: "estimating"}
