@@ -129,6 +129,7 @@ class SpeedMonitor:
         self._speed = math.nan
         self._speed_t = -math.inf
         self._heard_t = -math.inf  # the last estimate message, whatever its confidence
+        self._listen_t = -math.inf  # listening since (see resumed)
         self._heard_confidence = math.nan
         self._heard_finite = False
         self._speed_error_since = math.nan
@@ -151,6 +152,17 @@ class SpeedMonitor:
             self.reset()
             self.time_jumps = jumps
         self._last_t = t
+
+    def resumed(self, t: float, catch_up_s: float = 0.0) -> None:
+        """The monitor was not listening until ``t`` (its process stalled: inputs sent meanwhile
+        are still on their way, and the middleware may take ``catch_up_s`` more to deliver
+        them). Time without an input (an estimate, a confident speed, a part, a sensor
+        uncovered) counts from ``t + catch_up_s`` at the earliest: a stall is not the inputs'
+        silence."""
+        if not (math.isfinite(catch_up_s) and catch_up_s >= 0.0):
+            raise ParameterError(f"catch_up_s={catch_up_s!r} must be a non-negative number")
+        self._advance(t)
+        self._listen_t = t + catch_up_s
 
     def on_drive(self, t: float, driving: bool, target_speed_mps: float) -> None:
         """The drive state: whether it drives, and the target part speed (nan: none)."""
@@ -229,7 +241,9 @@ class SpeedMonitor:
         # the estimate stream went silent; estimates that keep coming without the confidence to
         # use them are a warning below (the estimator is alive, e.g. settling after a start)
         heard = t - self._heard_t <= cfg.sensor_timeout_s
-        unsure = self._driving and driving_for > cfg.sensor_timeout_s and not fresh
+        no_speed_for = t - max(self._speed_t, self._listen_t)  # listening, no confident speed
+        unsure = self._driving and driving_for > cfg.sensor_timeout_s
+        unsure = unsure and no_speed_for > cfg.sensor_timeout_s
         if unsure and not heard:
             alarms |= Alarm.SENSOR_TIMEOUT
 
@@ -262,10 +276,11 @@ class SpeedMonitor:
         if (
             self._driving
             and math.isfinite(self._last_part_t)
-            and t - self._last_part_t >= cfg.starvation_time_s
+            and t - max(self._last_part_t, self._listen_t) >= cfg.starvation_time_s
         ):
             alarms |= Alarm.STARVATION
-        if any(t - since >= cfg.track_full_time_s for since in self._covered_since.values()):
+        covered = self._covered_since.values()
+        if any(t - max(since, self._listen_t) >= cfg.track_full_time_s for since in covered):
             alarms |= Alarm.TRACK_FULL
 
         level = ERROR if alarms & _ERROR_ALARMS else (WARN if alarms else OK)
@@ -279,7 +294,7 @@ class SpeedMonitor:
                 if self._heard_finite
                 else "no speed in it"
             )
-            since = t - max(self._speed_t, self._driving_since)
+            since = t - max(self._speed_t, self._driving_since, self._listen_t)
             message = f"no confident speed estimate for {since:.1f} s ({why})"
         elif not self._driving:
             message = "idle"

@@ -13,6 +13,7 @@ from __future__ import annotations
 
 import math
 import threading
+import time
 from typing import Any
 
 from diagnostic_msgs.msg import DiagnosticArray, DiagnosticStatus, KeyValue
@@ -32,6 +33,7 @@ from feeder_ros.msg import (
 from feeder_ros.node_interfaces import NodeInterface, TopicSpec
 from feeder_ros.nodes.ros_parameters import declare_parameters, validator
 from feeder_ros.nodes.runner import run_node
+from feeder_ros.nodes.stall_detector import MIDDLEWARE_CATCH_UP_S, StallDetector
 from feeder_ros.physics.parameters import ParameterSpec
 
 _TIMES = (
@@ -207,6 +209,9 @@ class SpeedMonitorNode(Node):
         self.create_subscription(DriveState, "drive/state", self._on_drive_state, RELIABLE)
         self.create_subscription(DriveCommand, "drive/command", self._on_command, RELIABLE)
         self.create_timer(1.0 / self._values["publish_rate_hz"], self._publish)
+        # a tick late because this process stalled: the inputs sent meanwhile are still on their
+        # way; silence counts from here (not a false sensor timeout)
+        self._stalls = StallDetector(1.0 / self._values["publish_rate_hz"])
 
     def _now(self) -> float:
         return float(self.get_clock().now().nanoseconds) * 1e-9
@@ -254,8 +259,12 @@ class SpeedMonitorNode(Node):
             self._monitor.on_drive(self._now(), driving, self._values["target_speed_mps"])
 
     def _publish(self) -> None:
+        stalled = self._stalls.stalled(time.monotonic())
         with self._lock:
-            status = self._monitor.evaluate(self._now())
+            now = self._now()
+            if stalled:
+                self._monitor.resumed(now, MIDDLEWARE_CATCH_UP_S)
+            status = self._monitor.evaluate(now)
         message = SpeedStatus()
         message.header.stamp = self.get_clock().now().to_msg()
         message.target_speed_mps = status.target_speed_mps
@@ -273,6 +282,7 @@ class SpeedMonitorNode(Node):
             "feed_rate_ppm": f"{status.feed_rate_ppm:.3f}",
             "alarms": str(status.alarms),
             **status.details,
+            "stalls_seen": str(self._stalls.stalls),
         }
         diagnostic = DiagnosticStatus(
             name=f"{self.get_fully_qualified_name()}: part speed",

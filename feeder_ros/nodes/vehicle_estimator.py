@@ -17,10 +17,12 @@ from __future__ import annotations
 import math
 import struct
 import threading
+import time
 from typing import Any
 
 import numpy as np
 from diagnostic_msgs.msg import DiagnosticArray, DiagnosticStatus, KeyValue
+from rclpy.duration import Duration
 from rclpy.exceptions import InvalidHandle
 from rclpy.node import Node
 from rclpy.parameter import Parameter
@@ -39,6 +41,7 @@ from feeder_ros.msg import AccelerometerBatch, CarrierState, DriveCommand, Vehic
 from feeder_ros.node_interfaces import NodeInterface, TopicSpec
 from feeder_ros.nodes.ros_parameters import declare_parameters, validator
 from feeder_ros.nodes.runner import run_node
+from feeder_ros.nodes.stall_detector import MIDDLEWARE_CATCH_UP_S, StallDetector
 from feeder_ros.physics.parameters import (
     PARAMETER_SPECS,
     FeederParameters,
@@ -276,6 +279,10 @@ class VehicleEstimatorNode(Node):
         self._batches: list[tuple[np.ndarray, np.ndarray]] = []
         self._received = 0
         self._last_input = self.get_clock().now()
+        # after this process's own stall (a late diagnostics tick), silence counts from the
+        # resume plus the middleware's catch-up: the samples sent meanwhile are on their way
+        self._stalls = StallDetector(1.0)
+        self._listening_since = self._last_input
         self._record: EstimateRecord = self._estimator.last_estimate
         self._axis = _AXES.index(self._values["imu_axis"])
 
@@ -452,15 +459,20 @@ class VehicleEstimatorNode(Node):
     def _publish_diagnostics(self) -> None:
         with self._lock:
             record = self._record
-            silent_s = (self.get_clock().now() - self._last_input).nanoseconds * 1e-9
+            now = self.get_clock().now()
+            if self._stalls.stalled(time.monotonic()):
+                self._listening_since = now + Duration(seconds=MIDDLEWARE_CATCH_UP_S)
+            since = max(self._last_input, self._listening_since)
+            silent_s = (now - since).nanoseconds * 1e-9
+            waited_s = (now - self._last_input).nanoseconds * 1e-9  # since start, if none came
             received = self._received
         if received == 0:
             if silent_s > self._values["startup_timeout_s"]:
                 level = DiagnosticStatus.ERROR
-                text = f"no accelerometer sample in {silent_s:.1f} s since start"
+                text = f"no accelerometer sample in {waited_s:.1f} s since start"
             else:
                 level = DiagnosticStatus.WARN
-                text = f"waiting for the first accelerometer sample ({silent_s:.1f} s since start)"
+                text = f"waiting for the first accelerometer sample ({waited_s:.1f} s since start)"
         elif silent_s > self._values["input_timeout_s"]:
             level = DiagnosticStatus.ERROR
             text = f"sensor timeout: no accelerometer sample for {silent_s:.1f} s"
@@ -476,6 +488,7 @@ class VehicleEstimatorNode(Node):
             "mean_speed_mps": f"{record.mean_speed_mps:.6g}",
             "mean_speed_confidence": f"{record.mean_speed_confidence:.3f}",
             "slip_fraction": f"{record.slip_fraction:.4g}",
+            "stalls_seen": str(self._stalls.stalls),
         }
         status = DiagnosticStatus(
             name=f"{self.get_fully_qualified_name()}: estimate",

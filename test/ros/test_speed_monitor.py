@@ -2,6 +2,7 @@
 
 from __future__ import annotations
 
+import signal
 import sys
 import threading
 import time
@@ -15,6 +16,7 @@ from rclpy.qos import QoSProfile, ReliabilityPolicy
 from ros_test_tools import call, probe_node, running, wait_until
 
 from feeder_ros.msg import DriveCommand, PartSensorEvent, SpeedStatus, VehicleEstimate
+from feeder_ros.nodes.stall_detector import MIDDLEWARE_CATCH_UP_S
 
 BIN = Path(sys.executable).parent
 RELIABLE = QoSProfile(depth=100, reliability=ReliabilityPolicy.RELIABLE)
@@ -92,3 +94,78 @@ def test_stall_and_starvation_are_raised_and_cleared() -> None:
         finally:
             stop.set()
             feeder.join(timeout=5)
+
+
+def test_its_own_stall_is_no_sensor_timeout_but_silence_is() -> None:
+    """The monitor process stopped for 2.6 s (longer than sensor_timeout_s, 2 s) while the
+    estimator keeps publishing: no sensor timeout on resuming (silence counts from the late
+    tick; the estimates sent meanwhile arrive). Estimates that really stop raise it."""
+    ns = "/monitor_stall"
+    command = [
+        str(BIN / "speed_monitor"), "--ros-args", "-r", f"__ns:={ns}",
+        "-p", "target_speed_mps:=0.01",
+    ]  # fmt: skip
+    with running(command) as process, probe_node() as node:
+        statuses: list[tuple[float, SpeedStatus]] = []
+        diagnostics: list[DiagnosticArray] = []
+        node.create_subscription(
+            SpeedStatus, f"{ns}/speed/status", lambda m: statuses.append((time.monotonic(), m)), 100
+        )
+        node.create_subscription(DiagnosticArray, "/diagnostics", diagnostics.append, 100)
+        drive = node.create_publisher(DriveCommand, f"{ns}/drive/command", RELIABLE)
+        estimate = node.create_publisher(VehicleEstimate, f"{ns}/estimate", RELIABLE)
+        assert wait_until(lambda: estimate.get_subscription_count() > 0, 20.0)
+        sending = threading.Event()
+        sending.set()
+        stop = threading.Event()
+
+        def feed() -> None:
+            while not stop.is_set():
+                drive.publish(DriveCommand(enabled=True, frequency_hz=20.0, amplitude_n=40.0))
+                if sending.is_set():
+                    estimate.publish(
+                        VehicleEstimate(mean_speed_mps=0.01, mean_speed_confidence=1.0)
+                    )
+                time.sleep(0.05)
+
+        feeder = threading.Thread(target=feed, daemon=True)
+        feeder.start()
+        try:
+            assert wait_until(
+                lambda: bool(statuses) and statuses[-1][1].message == "at target", 15.0
+            )
+            process.send_signal(signal.SIGSTOP)
+            stopped = time.monotonic()
+            time.sleep(2.6)
+            process.send_signal(signal.SIGCONT)
+            # the estimates sent meanwhile may take a moment more (the reliable protocol repairs
+            # what the stopped reader missed after a heartbeat): at target again soon after
+            assert wait_until(
+                lambda: statuses[-1][0] > stopped + 2.6 and statuses[-1][1].message == "at target",
+                10.0,
+            )
+            assert statuses[-1][0] - stopped < 2.6 + MIDDLEWARE_CATCH_UP_S + 0.5
+            after = [m for t, m in statuses if t > stopped]
+            assert len(after) >= 2
+            # no alarm, no warning; just after resuming the speed may be too old to be "at target"
+            assert [m.message for m in after if m.alarms or m.level] == []
+            own = [
+                {v.key: v.value for v in s.values}
+                for array in diagnostics
+                for s in array.status
+                if s.name == f"{ns}/speed_monitor: part speed"
+            ]
+            assert own[-1]["stalls_seen"] == "1"
+            # the estimator goes silent (the monitor runs): a sensor timeout within about 2 s
+            sending.clear()
+            silent = time.monotonic()
+            assert wait_until(
+                lambda: bool(statuses[-1][1].alarms & SpeedStatus.ALARM_SENSOR_TIMEOUT), 10.0
+            )
+            assert statuses[-1][1].level == SpeedStatus.LEVEL_ERROR
+            # sensor_timeout_s (2 s) after the last estimate, sent up to 0.05 s before `silent`
+            assert statuses[-1][0] - silent >= 1.9
+        finally:
+            stop.set()
+            feeder.join(timeout=5)
+            process.send_signal(signal.SIGCONT)

@@ -3,8 +3,10 @@
 from __future__ import annotations
 
 import math
+import signal
 import subprocess
 import sys
+import threading
 import time
 from contextlib import ExitStack
 from pathlib import Path
@@ -398,3 +400,63 @@ def test_a_parameter_change_keeps_the_drive_command_in_force() -> None:
             node.destroy_node()
     finally:
         rclpy.shutdown(context=context)
+
+
+def test_its_own_stall_is_no_sensor_timeout_but_silence_is() -> None:
+    """The estimator process stopped for 2.6 s (input_timeout_s is 1 s) while the accelerometer
+    keeps sending: no sensor timeout once it runs again. Samples that really stop raise it."""
+    ns = "/estimator_stall"
+    command = [
+        str(BIN / "vehicle_estimator"), "--ros-args", "-r", f"__ns:={ns}",
+        "-p", f"qos_overrides.{ns}/imu.subscription.reliability:=reliable",
+    ]  # fmt: skip
+    with running(command) as process, probe_node() as node:
+        seen: list[tuple[float, int, str, dict[str, str]]] = []
+
+        def on_diagnostics(array: DiagnosticArray) -> None:
+            for s in array.status:
+                if s.name == f"{ns}/vehicle_estimator: estimate":
+                    values = {v.key: v.value for v in s.values}
+                    seen.append((time.monotonic(), s.level[0], s.message, values))
+
+        node.create_subscription(DiagnosticArray, "/diagnostics", on_diagnostics, 100)
+        imu = node.create_publisher(Imu, f"{ns}/imu", RELIABLE)
+        assert wait_until(lambda: imu.get_subscription_count() > 0, 20.0)
+        sending = threading.Event()
+        sending.set()
+        stop = threading.Event()
+
+        def feed() -> None:  # 200 Hz, in bursts of 10 samples every 50 ms
+            k = 0
+            while not stop.is_set():
+                for _ in range(10 if sending.is_set() else 0):
+                    t = 1000.0 + k / 200.0
+                    message = Imu()
+                    message.header.stamp.sec = int(t)
+                    message.header.stamp.nanosec = round((t - int(t)) * 1e9)
+                    message.linear_acceleration.x = 3.0 * math.sin(2 * math.pi * 25.0 * t)
+                    imu.publish(message)
+                    k += 1
+                time.sleep(0.05)
+
+        feeder = threading.Thread(target=feed, daemon=True)
+        feeder.start()
+        try:
+            assert wait_until(lambda: bool(seen) and int(seen[-1][3]["samples_received"]) > 0, 15.0)
+            process.send_signal(signal.SIGSTOP)
+            stopped = time.monotonic()
+            time.sleep(2.6)
+            process.send_signal(signal.SIGCONT)
+            assert wait_until(lambda: seen[-1][0] > stopped + 6.0, 15.0)
+            after = [(level, text) for t, level, text, _ in seen if t > stopped]
+            assert len(after) >= 3
+            assert [text for level, text in after if level == DiagnosticStatus.ERROR[0]] == []
+            assert seen[-1][3]["stalls_seen"] == "1"
+            # the accelerometer goes silent while the estimator runs: a sensor timeout
+            sending.clear()
+            assert wait_until(lambda: seen[-1][2].startswith("sensor timeout: "), 10.0)
+            assert seen[-1][1] == DiagnosticStatus.ERROR[0]
+        finally:
+            stop.set()
+            feeder.join(timeout=5)
+            process.send_signal(signal.SIGCONT)
