@@ -142,6 +142,7 @@ DEFAULTS: dict[str, Any] = {
     "input_timeout_s": 1.0,
     "startup_timeout_s": 10.0,
 }
+DIAGNOSTICS_PERIOD_S = 1.0  # the diagnostics timer's period (a later tick: the node stalled)
 SENSOR_QOS = QoSProfile(depth=500, reliability=ReliabilityPolicy.BEST_EFFORT)
 RELIABLE_QOS = QoSProfile(depth=1000, reliability=ReliabilityPolicy.RELIABLE)
 COMMAND_QOS = QoSProfile(depth=10, reliability=ReliabilityPolicy.RELIABLE)
@@ -281,7 +282,7 @@ class VehicleEstimatorNode(Node):
         self._last_input = self.get_clock().now()
         # after this process's own stall (a late diagnostics tick), silence counts from the
         # resume plus the middleware's catch-up: the samples sent meanwhile are on their way
-        self._stalls = StallDetector(1.0)
+        self._stalls = StallDetector(DIAGNOSTICS_PERIOD_S)
         self._listening_since = self._last_input
         self._record: EstimateRecord = self._estimator.last_estimate
         self._axis = _AXES.index(self._values["imu_axis"])
@@ -307,7 +308,7 @@ class VehicleEstimatorNode(Node):
             )
         self.create_subscription(DriveCommand, "drive/command", self._on_command, COMMAND_QOS)
         self.create_timer(1.0 / self._values["publish_rate_hz"], self._estimate)
-        self.create_timer(1.0, self._publish_diagnostics)
+        self.create_timer(DIAGNOSTICS_PERIOD_S, self._publish_diagnostics)
 
     # -- parameters ----------------------------------------------------------------------------
     def _apply_parameters(self, parameters: list[Parameter[Any]]) -> None:
