@@ -210,12 +210,10 @@ def problems(
         found.append("no part left the track")
     if summary["watchdog"].get("tripped") is not True:
         found.append("the watchdog did not trip when the controller's heartbeat stopped")
-    messages = summary.get("diagnostic_messages", {})
-    times = summary.get("diagnostic_at_s", {})
+    messages, times = summary["diagnostic_messages"], summary["diagnostic_at_s"]
     for name, level in sorted(summary["diagnostics"].items()):
         if level in ("ERROR", "STALE") and name != expected_error:
-            at = f" at {times[name]:g} s" if name in times else ""
-            found.append(f"{level} from {name}{at}: {messages.get(name, '')}")
+            found.append(f"{level} from {name} at {times[name]:g} s: {messages[name]}")
     return found
 
 
@@ -323,9 +321,8 @@ def main(argv: list[str] | None = None) -> int:
     print(f"parts fed: {summary['parts_fed']}")
     print("diagnostics seen until the cell stopped (worst level per status):")
     for name, level in sorted(summary["diagnostics"].items()):
-        message = summary["diagnostic_messages"].get(name, "")
-        at = summary["diagnostic_at_s"].get(name)
-        detail = f" ({message}; first at {at:g} s)" if level != "OK" and at is not None else ""
+        message, at = summary["diagnostic_messages"][name], summary["diagnostic_at_s"][name]
+        detail = f" ({message}; first at {at:g} s)" if level != "OK" else ""
         print(f"  {level:5} {name}{detail}")
     print(f"plots: {', '.join(str(p) for p in plots)}; data: {args.output / 'summary.json'}")
     print(f"demo took {time.monotonic() - started:.0f} s")
