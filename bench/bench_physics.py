@@ -302,15 +302,27 @@ def many_parts(duration_s: float, count: int) -> list[str]:
     lines = [
         f"#### {count} parts on one carrier (A = 40 N, undamped, {duration_s:g} s, output 100 Hz)",
         "",
-        "| parts | wall [s] | sim s / wall s | events | mean part speed [mm/s] | slip fraction |",
-        "| --- | ---: | ---: | ---: | ---: | ---: |",
+        "The run's events are put in one time-ordered list when first read (`EventLog`): 'wall'",
+        "is `simulate()`, 'events read' the first read of a fresh result's events (best of 3",
+        "each), and the last ratio counts both.",
+        "",
+        "| parts | wall [s] | sim s / wall s | events read [s] | sim s / wall s, events read "
+        "| events | mean part speed [mm/s] | slip fraction |",
+        "| --- | ---: | ---: | ---: | ---: | ---: | ---: | ---: |",
     ]
     for label, parts in (("one part type", same), ("all-distinct frictions", distinct)):
         result, wall = timed(
             lambda parts=parts: simulate(params, duration_s, 100.0, parts=parts), 3
         )
+        read = math.inf
+        for _ in range(3):
+            fresh = simulate(params, duration_s, 100.0, parts=parts)
+            started = time.perf_counter()
+            fresh.events.arrays()
+            read = min(read, time.perf_counter() - started)
         lines.append(
-            f"| {label} | {wall:.3f} | {duration_s / wall:.4g} | {result.event_t_s.size} | "
+            f"| {label} | {wall:.3f} | {duration_s / wall:.4g} | {read:.3f} | "
+            f"{duration_s / (wall + read):.4g} | {result.event_t_s.size} | "
             f"{float(np.nanmean(result.mean_part_speed_mps())) * 1e3:.4g} | "
             f"{float(np.nanmean(result.slip_fraction())):.3f} |"
         )

@@ -289,6 +289,8 @@ def _concatenate(chunks: Sequence[SimulationResult]) -> SimulationResult:
     """One result from consecutive ``FeederSimulator.advance`` chunks (totals from the last)."""
     from dataclasses import replace
 
+    from feeder_ros.physics.simulation import EventLog
+
     last = chunks[-1]
     return replace(
         last,
@@ -303,11 +305,9 @@ def _concatenate(chunks: Sequence[SimulationResult]) -> SimulationResult:
                 "part_x_m",
                 "part_v_mps",
                 "part_phase",
-                "event_t_s",
-                "event_kind",
-                "event_part",
             )
         },
+        events=EventLog([chunk.events.arrays() for chunk in chunks]),
     )
 
 

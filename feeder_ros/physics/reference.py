@@ -21,7 +21,7 @@ from scipy.integrate import solve_ivp
 
 from feeder_ros.physics.drive import DriveSchedule
 from feeder_ros.physics.parameters import FeederParameters
-from feeder_ros.physics.simulation import EventKind, PartSpec, Phase, SimulationResult
+from feeder_ros.physics.simulation import EventKind, EventLog, PartSpec, Phase, SimulationResult
 
 __all__ = ["reference_simulate"]
 
@@ -328,9 +328,7 @@ def reference_simulate(
         part_x_m=out["px"],
         part_v_mps=out["pv"],
         part_phase=out["pp"],
-        event_t_s=np.array(ev_t),
-        event_kind=np.array(ev_k, np.int8),
-        event_part=np.array(ev_p, np.int64),
+        events=EventLog.of(np.array(ev_t), np.array(ev_k, np.int8), np.array(ev_p, np.int64)),
         part_start_t_s=np.zeros(N),
         part_start_x_m=start_x,
         part_end_t_s=np.where(np.isfinite(exit_t), exit_t, duration_s),

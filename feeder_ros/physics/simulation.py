@@ -48,7 +48,7 @@ from __future__ import annotations
 import enum
 import functools
 import math
-from collections.abc import Sequence
+from collections.abc import Callable, Sequence
 from dataclasses import dataclass, replace
 from typing import Any
 
@@ -63,6 +63,7 @@ from feeder_ros.physics.parameters import finite_number as _finite
 
 __all__ = [
     "EventKind",
+    "EventLog",
     "FeederSimulator",
     "ManySummary",
     "PartSpec",
@@ -150,6 +151,70 @@ class PartSpec:
         return mass, mu_s, mu_d
 
 
+EventArrays = tuple[F64, I8, I64]
+
+
+class EventLog:
+    """A run's events in time order, ``(t_s, kind, part)``, put in order when first read.
+
+    The group march leaves its events per group of parts; putting 600,000 of them (1000 parts,
+    10 s at 40 N) into one time-ordered list takes about a seventh of that run, so a run whose
+    events are never read does not pay for it. ``EventLog.of(t, kind, part)`` wraps arrays that
+    are already in time order. Pickles as its ordered arrays.
+    """
+
+    __slots__ = ("_arrays", "_chunks")
+
+    def __init__(self, chunks: Sequence[EventArrays | Callable[[], EventArrays]]) -> None:
+        """``chunks``: event arrays, or functions that return them, to be concatenated in this
+        order and then sorted stably by time (a chunk of the group march is in order already)."""
+        self._chunks: tuple[EventArrays | Callable[[], EventArrays], ...] = tuple(chunks)
+        self._arrays: EventArrays | None = None
+
+    @classmethod
+    def of(cls, t_s: npt.ArrayLike, kind: npt.ArrayLike, part: npt.ArrayLike) -> EventLog:
+        """Events already in time order (``t_s`` float64, ``kind`` int8, ``part`` int64)."""
+        log = cls(())
+        log._arrays = (
+            np.asarray(t_s, dtype=np.float64),
+            np.asarray(kind, dtype=np.int8),
+            np.asarray(part, dtype=np.int64),
+        )
+        return log
+
+    def arrays(self) -> EventArrays:
+        """``(t_s, kind, part)`` in time order (built on the first call, then kept)."""
+        if self._arrays is None:
+            chunks = [chunk() if callable(chunk) else chunk for chunk in self._chunks]
+            self._arrays = _in_time_order(chunks)
+            self._chunks = ()
+        return self._arrays
+
+    def __reduce__(self) -> tuple[Callable[..., EventLog], EventArrays]:
+        return (EventLog.of, self.arrays())
+
+
+def _in_time_order(chunks: list[EventArrays]) -> EventArrays:
+    """The chunks' events, one after the other, sorted stably by time."""
+    if not chunks:
+        return np.zeros(0), np.zeros(0, np.int8), np.zeros(0, np.int64)
+    if len(chunks) == 1 and _k.check_samples(chunks[0][0]) == 0:
+        # one chunk (fresh copies) already in time order: as it is
+        t, kind, part = chunks[0]
+        return t, kind.astype(np.int8, copy=False), part.astype(np.int64, copy=False)
+    event_t = np.concatenate([c[0] for c in chunks])
+    event_kind = np.concatenate([c[1] for c in chunks]).astype(np.int8, copy=False)
+    event_part = np.concatenate([c[2] for c in chunks]).astype(np.int64, copy=False)
+    if _k.check_samples(event_t) != 0:
+        # out of order (a drive change at the chunk's end comes first) or not finite; the group
+        # march's passes come in order one after the other and need no sort
+        order = _k.stable_time_order(event_t)
+        event_t = event_t[order]
+        event_kind = event_kind[order]
+        event_part = event_part[order]
+    return event_t, event_kind, event_part
+
+
 @dataclass(frozen=True)
 class SimulationResult:
     """Samples and events of a run (or of one ``FeederSimulator.advance`` chunk).
@@ -160,7 +225,8 @@ class SimulationResult:
     parts ``part_x_m``, ``part_v_mps`` (n, N) lab frame, ``part_phase`` (n, N) int8
     (:class:`Phase`).
     Events, time-ordered: ``event_t_s``, ``event_kind`` (:class:`EventKind`), ``event_part`` (part
-    index, -1 for carrier/drive events). Exact per-part totals over the run: ``part_start_t_s``,
+    index, -1 for carrier/drive events), from ``events`` (an :class:`EventLog`: put in time order
+    when first read). Exact per-part totals over the run: ``part_start_t_s``,
     ``part_start_x_m`` (lab), ``part_end_t_s`` (exit time or end of run), ``part_end_x_m``,
     ``part_slip_time_s`` (time spent slipping) and ``part_exit_t_s`` (nan if still on the track).
     The (n, N) part arrays may be column-major (Fortran order) when the groups ran in parallel.
@@ -174,15 +240,25 @@ class SimulationResult:
     part_x_m: F64
     part_v_mps: F64
     part_phase: I8
-    event_t_s: F64
-    event_kind: I8
-    event_part: I64
+    events: EventLog
     part_start_t_s: F64
     part_start_x_m: F64
     part_end_t_s: F64
     part_end_x_m: F64
     part_slip_time_s: F64
     part_exit_t_s: F64
+
+    @property
+    def event_t_s(self) -> F64:
+        return self.events.arrays()[0]
+
+    @property
+    def event_kind(self) -> I8:
+        return self.events.arrays()[1]
+
+    @property
+    def event_part(self) -> I64:
+        return self.events.arrays()[2]
 
     @property
     def part_count(self) -> int:
@@ -611,7 +687,7 @@ class FeederSimulator:
         out_cx, out_cv, out_ca, out_cb, out_px, out_pv, out_pp = _output_arrays(n, N, march)
         seg = self._drive.segments()
         self._state[_k.S_SEG] = seg.index_at(self.time_s)
-        chunks: list[tuple[F64, I8, I64]] = []
+        chunks: list[EventArrays] = []
         # events already due: drive changes at the chunk's start, and a logged drive change
         # exactly at its end (the kernel stops before it)
         pending = list(self._pending_events)
@@ -621,6 +697,7 @@ class FeederSimulator:
         if pending:
             pt, pk, pp = zip(*pending, strict=True)
             chunks.append((np.array(pt), np.array(pk, np.int8), np.array(pp, np.int64)))
+        log: list[EventArrays | Callable[[], EventArrays]] = []
         if march:
             # carrier alone first (pieces recorded), then every group along it, in parallel;
             # the part arrays are column-major there (each group writes its own columns)
@@ -634,7 +711,7 @@ class FeederSimulator:
                 chunks,
                 record=True,
             )
-            chunks = self._run_groups(
+            log = self._run_groups(
                 pieces, t_end, samples, out_cx, out_cv, out_px, out_pv, out_pp, chunks
             )
             if self._g.has_duplicate_sticking():
@@ -649,23 +726,8 @@ class FeederSimulator:
                 chunks,
                 record=False,
             )
+            log.extend(chunks)
         self._pending_events = []
-        if len(chunks) == 1 and _k.check_samples(chunks[0][0]) == 0:
-            # one chunk (fresh copies) already in time order: as it is
-            event_t = chunks[0][0]
-            event_kind = chunks[0][1].astype(np.int8, copy=False)
-            event_part = chunks[0][2].astype(np.int64, copy=False)
-        else:
-            event_t = np.concatenate([c[0] for c in chunks])
-            event_kind = np.concatenate([c[1] for c in chunks]).astype(np.int8, copy=False)
-            event_part = np.concatenate([c[2] for c in chunks]).astype(np.int64, copy=False)
-            if _k.check_samples(event_t) != 0:
-                # out of order (a drive change at the chunk's end comes first) or not finite; the
-                # group march's passes come in order one after the other and need no sort
-                order = _k.stable_time_order(event_t)
-                event_t = event_t[order]
-                event_kind = event_kind[order]
-                event_part = event_part[order]
         return SimulationResult(
             t_s=samples,
             carrier_x_m=out_cx,
@@ -675,9 +737,7 @@ class FeederSimulator:
             part_x_m=out_px,
             part_v_mps=out_pv,
             part_phase=out_pp,
-            event_t_s=event_t,
-            event_kind=event_kind,
-            event_part=event_part,
+            events=EventLog(log),
             **self._totals(),
         )
 
@@ -792,13 +852,14 @@ class FeederSimulator:
         out_px: F64,
         out_pv: F64,
         out_pp: I8,
-        earlier: list[tuple[F64, I8, I64]],
-    ) -> list[tuple[F64, I8, I64]]:
+        earlier: list[EventArrays],
+    ) -> list[EventArrays | Callable[[], EventArrays]]:
         """March every group along the recorded carrier pieces (one-way coupling), in parallel.
 
         Returns the run's events, one chunk per pass in time order, the chunks one after the
         other: each pass's events with those of ``earlier`` (the drive's and the carrier's, in
-        input order before the groups') up to the pass's end."""
+        input order before the groups') up to the pass's end. A pass's chunk is a function that
+        puts them in order (:class:`EventLog` calls it when the events are first read)."""
         g, m = self._g, self._m
         G = g.size
         track = float(self._model[_k.TRACK])
@@ -806,7 +867,7 @@ class FeederSimulator:
         pre_kind = np.concatenate([c[1] for c in earlier]) if earlier else np.zeros(0, np.int8)
         pre_part = np.concatenate([c[2] for c in earlier]) if earlier else np.zeros(0, np.int64)
         pre_left = np.ones(pre_t.size, bool)
-        chunks: list[tuple[F64, I8, I64]] = []
+        chunks: list[EventArrays | Callable[[], EventArrays]] = []
         n_total = pieces.shape[0]
         for k0 in range(0, max(n_total, 1), self.pieces_per_pass):
             batch = np.ascontiguousarray(pieces[k0 : k0 + self.pieces_per_pass])
@@ -821,7 +882,8 @@ class FeederSimulator:
             # small passes run on one thread: a parallel region costs more than it saves
             # there (and OpenMP's spin-waiting is slow on a loaded machine)
             threads = numba.get_num_threads()
-            if G * nb < SMALL_PARALLEL_WORK:
+            serial = G * nb < SMALL_PARALLEL_WORK
+            if serial:
                 numba.set_num_threads(1)
             try:
                 while True:
@@ -851,11 +913,14 @@ class FeederSimulator:
                 # the earlier events up to the pass's end (ties at the end: before the groups')
                 take = pre_left.copy() if final else pre_left & (pre_t <= t_stop)
                 pre_left &= ~take
-                events = _k.group_events_in_time_order(
+                # in order when first read; every argument is this pass's own copy (exit times
+                # as they are now: later passes and advances only add exits after this pass)
+                order_pass = functools.partial(
+                    _pass_events_in_time_order, serial,
                     pre_t[take], pre_kind[take], pre_part[take],
-                    ev_t, ev_kind, ev_part, ev_n, members_before, m.exit_t,
+                    ev_t, ev_kind, ev_part, ev_n, members_before, m.exit_t.copy(),
                 )  # fmt: skip
-                chunks.append(events)
+                chunks.append(order_pass)
             finally:
                 numba.set_num_threads(threads)
             if final:
@@ -881,6 +946,18 @@ class FeederSimulator:
             "part_slip_time_s": slip,
             "part_exit_t_s": m.exit_t[:N].copy(),
         }
+
+
+def _pass_events_in_time_order(serial: bool, *arrays: npt.NDArray[Any]) -> EventArrays:
+    """:func:`~feeder_ros.physics.sharp_solver.group_events_in_time_order` of one group pass, on
+    one thread if the pass ran on one (a small pass: see ``SMALL_PARALLEL_WORK``)."""
+    threads = numba.get_num_threads()
+    if serial:
+        numba.set_num_threads(1)
+    try:
+        return _k.group_events_in_time_order(*arrays)
+    finally:
+        numba.set_num_threads(threads)
 
 
 class _Groups:

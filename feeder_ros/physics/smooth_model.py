@@ -539,7 +539,7 @@ def simulate_smooth(
     (+1 where ``K`` is nearer ``K_f``); ``BRANCH_SWITCH`` events are its sign changes. ``options``
     picks the ``solve_ivp`` method and tolerances (default :class:`SolverOptions`).
     """
-    from feeder_ros.physics.simulation import EventKind, Phase, SimulationResult
+    from feeder_ros.physics.simulation import EventKind, EventLog, Phase, SimulationResult
 
     if not (output_rate_hz > 0.0 and math.isfinite(output_rate_hz)):
         raise ValueError(f"output_rate_hz={output_rate_hz!r} must be positive and finite")
@@ -613,9 +613,11 @@ def simulate_smooth(
         part_x_m=part_x,
         part_v_mps=part_v,
         part_phase=part_phase,
-        event_t_s=np.array([e[0] for e in events], dtype=np.float64),
-        event_kind=np.array([e[1] for e in events], dtype=np.int8),
-        event_part=np.array([e[2] for e in events], dtype=np.int64),
+        events=EventLog.of(
+            np.array([e[0] for e in events], dtype=np.float64),
+            np.array([e[1] for e in events], dtype=np.int8),
+            np.array([e[2] for e in events], dtype=np.int64),
+        ),
         part_start_t_s=np.zeros(N),
         part_start_x_m=start_x,
         part_end_t_s=end_t,

@@ -2,6 +2,8 @@
 
 from __future__ import annotations
 
+import pickle
+
 import numpy as np
 import pytest
 
@@ -335,6 +337,36 @@ def test_table_march_equals_the_global_event_loop(
     np.testing.assert_array_equal(one.event_part[a], two.event_part[b])
     np.testing.assert_allclose(one.event_t_s[a], two.event_t_s[b], rtol=0, atol=1e-12)
     assert np.all(np.diff(two.event_t_s) >= 0.0)
+
+
+def test_march_events_read_later_are_those_read_at_once() -> None:
+    """The group march's events are put in time order when first read (``EventLog``). Read after
+    the simulator has run on (parts leaving in the later chunks, groups merged, many passes) they
+    are those read at once; a pickled result carries them."""
+    params = FeederParameters(drive_amplitude_n=40.0, track_length_m=0.004)
+    specs = _shared_friction_parts() + _distinct_parts(6, 3)
+
+    def simulator() -> FeederSimulator:
+        sim = FeederSimulator(params, specs)
+        sim.parallel_min_groups = 1
+        sim.march_min_work_s = 0.0
+        sim.pieces_per_pass = 7
+        return sim
+
+    at_once, later = simulator(), simulator()
+    chunks = [at_once.advance(t) for t in (1.0, 2.0, 3.0)]
+    read = [(r.event_t_s.copy(), r.event_kind.copy(), r.event_part.copy()) for r in chunks]
+    unread = [later.advance(t) for t in (1.0, 2.0, 3.0)]
+    exits = [int(np.count_nonzero(kind == EventKind.PART_EXIT)) for _, kind, _ in read]
+    assert exits[0] > 0 and exits[1] > exits[0], exits  # parts leave in each of the chunks
+    for (t, kind, part), result in zip(read, unread, strict=True):
+        assert t.size > 100
+        np.testing.assert_array_equal(result.event_t_s, t)
+        np.testing.assert_array_equal(result.event_kind, kind)
+        np.testing.assert_array_equal(result.event_part, part)
+        copy = pickle.loads(pickle.dumps(result))
+        np.testing.assert_array_equal(copy.event_t_s, t)
+        np.testing.assert_array_equal(copy.event_part, part)
 
 
 def _by_part(result: SimulationResult) -> tuple[np.ndarray, np.ndarray, np.ndarray]:

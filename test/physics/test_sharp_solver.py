@@ -14,6 +14,7 @@ from feeder_ros.physics.parameters import FeederParameters
 from feeder_ros.physics.reference import reference_simulate
 from feeder_ros.physics.simulation import (
     EventKind,
+    EventLog,
     FeederSimulator,
     PartSpec,
     Phase,
@@ -99,9 +100,7 @@ def test_a_second_drive_change_within_a_nanosecond_from_rest_matches_dop853(
         ref = dataclasses.replace(
             ref,
             branch=np.r_[np.int8(-1), ref.branch[1:]],
-            event_t_s=ref.event_t_s[1:],
-            event_kind=ref.event_kind[1:],
-            event_part=ref.event_part[1:],
+            events=EventLog.of(ref.event_t_s[1:], ref.event_kind[1:], ref.event_part[1:]),
         )
     assert_same_run(run, ref)
     assert np.max(np.abs(run.carrier_x_m)) > 1e-8  # (the carrier did get going)
