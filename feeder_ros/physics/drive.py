@@ -86,6 +86,8 @@ class DriveSegments:
     def index_at(self, time_s: float) -> int:
         """Index of the segment in force at ``time_s`` (segments are half-open ``[start,
         next)``)."""
+        if self.start_s.shape[0] == 1:
+            return 0  # a constant drive (the common case: no search)
         return max(int(np.searchsorted(self.start_s, time_s, side="right")) - 1, 0)
 
     def force(self, time_s: npt.ArrayLike) -> npt.NDArray[np.float64]:

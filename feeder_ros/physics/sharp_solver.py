@@ -665,6 +665,30 @@ def check_samples(samples):
 
 
 @njit(cache=True)
+def part_totals(group, offset, slip0, exit_t, start_t, start_x, g_y, g_slip, t, x):
+    """Each part's totals now (time ``t``, carrier at ``x``), fresh arrays: start time and lab
+    position, end time (exit or now), end lab position, time spent slipping, exit time (nan on
+    the track). A part on the track (``group >= 0``) is at ``offset + y`` of its group on the
+    carrier and has slipped its group's total minus ``slip0`` (the group's total when it joined);
+    a part that left keeps its exit values (``offset`` its lab position, ``slip0`` its slip)."""
+    n = group.shape[0]
+    end_t = np.empty(n)
+    end_x = np.empty(n)
+    slip = np.empty(n)
+    for i in range(n):
+        g = group[i]
+        if g >= 0:
+            end_t[i] = t
+            end_x[i] = offset[i] + g_y[g] + x
+            slip[i] = g_slip[g] - slip0[i]
+        else:
+            end_t[i] = exit_t[i]
+            end_x[i] = offset[i]
+            slip[i] = slip0[i]
+    return start_t[:n].copy(), start_x[:n].copy(), end_t, end_x, slip, exit_t[:n].copy()
+
+
+@njit(cache=True)
 def _log(ev_t, ev_kind, ev_part, counters, t, kind, part):
     n = counters[1]
     ev_t[n] = t

@@ -50,7 +50,7 @@ import functools
 import math
 from collections.abc import Callable, Sequence
 from dataclasses import dataclass, replace
-from typing import Any
+from typing import Any, Literal
 
 import numba
 import numpy as np
@@ -531,27 +531,25 @@ class FeederSimulator:
                 nxt[last[gi]] = i
             last[gi] = i
         v0 = float(self._state[_k.S_V])
+        x0 = float(self._state[_k.S_X])
+        # the fields of one kind come from one array, each field a contiguous row of it (the
+        # tables replace, never resize, their arrays)
         g = _Groups.__new__(_Groups)  # every field set below
         g.size = G
-        g.L = np.array([key[0] for key in keys], np.float64)
-        g.D = np.array([key[1] for key in keys], np.float64)
-        g.mass = np.array(g_mass, np.float64)
-        g.u = np.array([v0] * G, np.float64)
-        g.y = np.zeros(G)
-        g.slip = np.zeros(G)
-        g.lead = np.array(g_lead, np.float64)
+        g.L, g.D, g.mass, g.u, g.y, g.slip, g.lead = np.array(
+            [[key[0] for key in keys], [key[1] for key in keys], g_mass, [v0] * G, [0.0] * G,
+             [0.0] * G, g_lead],
+            np.float64,
+        )  # fmt: skip
         g.phase = np.zeros(G, np.int8)
         g.head = np.array(g_head, np.int64)
         m = _Members.__new__(_Members)  # every field set below
         m.size = N
-        m.group = np.array(group, np.int64)
-        m.next = np.array(nxt, np.int64)
-        m.offset = np.array(offset, np.float64)
-        m.mass = np.array(mass, np.float64)
-        m.slip0 = np.zeros(N)
-        m.exit_t = np.array([math.nan] * N, np.float64)
-        m.start_t = np.zeros(N)
-        m.start_x = m.offset + self._state[_k.S_X]
+        m.group, m.next = np.array([group, nxt], np.int64)
+        m.offset, m.mass, m.slip0, m.exit_t, m.start_t, m.start_x = np.array(
+            [offset, mass, [0.0] * N, [math.nan] * N, [0.0] * N, [o + x0 for o in offset]],
+            np.float64,
+        )
         self._g, self._m = g, m
 
     def _regroup(self) -> None:
@@ -755,6 +753,8 @@ class FeederSimulator:
 
     def _march_pays(self, duration_s: float) -> bool:
         """Whether the group march is worth its start-up for a chunk of ``duration_s``."""
+        if self._g.size < self.parallel_min_groups:
+            return False
         groups = int(np.count_nonzero(self._g.head >= 0))
         return (
             groups >= self.parallel_min_groups and duration_s * groups**2 >= self.march_min_work_s
@@ -930,21 +930,17 @@ class FeederSimulator:
     def _totals(self) -> dict[str, F64]:
         m, g = self._m, self._g
         N = m.size
-        gi = m.group[:N]
-        on = gi >= 0
-        gon = gi[on]
-        end_t = np.where(on, self.time_s, m.exit_t[:N])
-        end_x = m.offset[:N].copy()
-        end_x[on] = end_x[on] + g.y[gon] + self._state[_k.S_X]
-        slip = m.slip0[:N].copy()
-        slip[on] = g.slip[gon] - slip[on]
+        start_t, start_x, end_t, end_x, slip, exit_t = _k.part_totals(
+            m.group[:N], m.offset, m.slip0, m.exit_t, m.start_t, m.start_x, g.y, g.slip,
+            self.time_s, float(self._state[_k.S_X]),
+        )  # fmt: skip
         return {
-            "part_start_t_s": m.start_t[:N].copy(),
-            "part_start_x_m": m.start_x[:N].copy(),
+            "part_start_t_s": start_t,
+            "part_start_x_m": start_x,
             "part_end_t_s": end_t,
             "part_end_x_m": end_x,
             "part_slip_time_s": slip,
-            "part_exit_t_s": m.exit_t[:N].copy(),
+            "part_exit_t_s": exit_t,
         }
 
 
@@ -958,6 +954,14 @@ def _pass_events_in_time_order(serial: bool, *arrays: npt.NDArray[Any]) -> Event
         return _k.group_events_in_time_order(*arrays)
     finally:
         numba.set_num_threads(threads)
+
+
+# zero-length arrays shared by every empty group and member table: no element to write, and code
+# that grows a table replaces its arrays. (Not flagged read-only: numba would compile its kernels
+# again for read-only array types.)
+_EMPTY_F64 = np.zeros(0)
+_EMPTY_I64 = np.zeros(0, np.int64)
+_EMPTY_I8 = np.zeros(0, np.int8)
 
 
 class _Groups:
@@ -977,7 +981,16 @@ class _Groups:
 
     @classmethod
     def empty(cls) -> _Groups:
-        return cls(0)
+        """No groups (the shared zero-length arrays cannot change; :meth:`add` replaces them)."""
+        groups = cls.__new__(cls)
+        groups.size = 0
+        for name in cls._FIELDS:
+            setattr(
+                groups,
+                name,
+                _EMPTY_I8 if name == "phase" else _EMPTY_I64 if name == "head" else _EMPTY_F64,
+            )
+        return groups
 
     _FIELDS = ("L", "D", "mass", "u", "y", "slip", "lead", "phase", "head")
 
@@ -1039,7 +1052,12 @@ class _Members:
 
     @classmethod
     def empty(cls) -> _Members:
-        return cls()
+        """No members (the shared zero-length arrays cannot change; :meth:`add` replaces them)."""
+        members = cls.__new__(cls)
+        members.size = 0
+        for name in cls._FIELDS:
+            setattr(members, name, _EMPTY_I64 if name in ("group", "next") else _EMPTY_F64)
+        return members
 
     _FIELDS = ("group", "next", "offset", "mass", "slip0", "exit_t", "start_t", "start_x")
 
@@ -1080,28 +1098,26 @@ def _output_arrays(n: int, parts: int, march: bool) -> tuple[F64, F64, F64, I8, 
     the project's machine type; the figures depend on the allocator's history in the process).
     For the group march the part arrays are column-major and pre-set to exited (NaN)."""
     align = 64
-    sizes = [8 * n, 8 * n, 8 * n, n, 8 * n * parts, 8 * n * parts, n * parts]
-    starts = []
-    total = 0
-    for size in sizes:
-        starts.append(total)
-        total += -(-size // align) * align
-    block = np.empty(total + align, np.uint8)
-    shift = (-block.ctypes.data) % align
-    views = [block[shift + a : shift + a + size] for a, size in zip(starts, sizes, strict=True)]
-    cx, cv, ca = (v.view(np.float64) for v in views[:3])
-    cb = views[3].view(np.int8)
+    f8 = -(-8 * n // align) * align  # bytes of one carrier array, rounded up to the alignment
+    i1 = -(-n // align) * align
+    p8 = -(-8 * n * parts // align) * align
+    p1 = -(-n * parts // align) * align
+    block = np.empty(3 * f8 + i1 + 2 * p8 + p1 + align, np.uint8)
+    at = (-block.ctypes.data) % align
+    ndarray = np.ndarray
+    cx = ndarray((n,), np.float64, block, at)
+    cv = ndarray((n,), np.float64, block, at + f8)
+    ca = ndarray((n,), np.float64, block, at + 2 * f8)
+    cb = ndarray((n,), np.int8, block, at + 3 * f8)
+    at += 3 * f8 + i1
+    order: Literal["C", "F"] = "F" if march else "C"
+    px = ndarray((n, parts), np.float64, block, at, order=order)
+    pv = ndarray((n, parts), np.float64, block, at + p8, order=order)
+    pp = ndarray((n, parts), np.int8, block, at + 2 * p8, order=order)
     if march:
-        px = views[4].view(np.float64).reshape(parts, n).T
-        pv = views[5].view(np.float64).reshape(parts, n).T
-        pp = views[6].view(np.int8).reshape(parts, n).T
         px.fill(np.nan)
         pv.fill(np.nan)
         pp.fill(Phase.EXITED)
-    else:
-        px = views[4].view(np.float64).reshape(n, parts)
-        pv = views[5].view(np.float64).reshape(n, parts)
-        pp = views[6].view(np.int8).reshape(n, parts)
     return cx, cv, ca, cb, px, pv, pp
 
 

@@ -358,7 +358,7 @@ def test_march_events_read_later_are_those_read_at_once() -> None:
     read = [(r.event_t_s.copy(), r.event_kind.copy(), r.event_part.copy()) for r in chunks]
     unread = [later.advance(t) for t in (1.0, 2.0, 3.0)]
     exits = [int(np.count_nonzero(kind == EventKind.PART_EXIT)) for _, kind, _ in read]
-    assert exits[0] > 0 and exits[1] > exits[0], exits  # parts leave in each of the chunks
+    assert min(exits) > 0, exits  # parts leave in each of the chunks
     for (t, kind, part), result in zip(read, unread, strict=True):
         assert t.size > 100
         np.testing.assert_array_equal(result.event_t_s, t)

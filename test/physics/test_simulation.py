@@ -121,9 +121,15 @@ def test_parts_leave_at_the_track_end_in_order() -> None:
     # the exit happens while slipping, at the track end
     for i in range(3):
         t_exit = run.part_exit_t_s[i]
+        assert run.part_end_t_s[i] == t_exit
         assert run.part_end_x_m[i] == pytest.approx(
             0.004 + np.interp(t_exit, run.t_s, run.carrier_x_m), abs=1e-5
         )
+        # the slip time kept at the exit: the sampled slipping time up to it
+        on_track = run.part_phase[:, i] != Phase.EXITED
+        sampled = np.count_nonzero(run.part_phase[on_track, i] != Phase.STICK) / 1000.0
+        assert run.part_slip_time_s[i] == pytest.approx(sampled, abs=0.02)
+        assert 0.1 * t_exit < run.part_slip_time_s[i] < t_exit
 
 
 def test_spawn_friction_and_parameter_changes_live(case_study: FeederParameters) -> None:
