@@ -319,11 +319,9 @@ SHIFT_CHAIN = 3  # shifts in a row before a direct evaluation (round-off grows w
 
 
 @njit(cache=True, inline="always")
-def _shift_basis(dt, sigma, lam, w, cc, ss, sn, cs):
-    """The basis ``dt`` later (``|dt| * rate <= SHIFT_RAD``): ``C(t+dt) = C(dt)C(t) +
-    lam*S(dt)S(t)``, ``S(t+dt) = S(dt)C(t) + C(dt)S(t)`` (the fundamental solution of ``C' =
-    sigma*C + lam*S``, ``S' = sigma*S + C``) and the drive's angle addition, with ``C(dt)``,
-    ``S(dt)``, ``sin(w*dt)``, ``cos(w*dt)`` from their Taylor series to the fifth or sixth power."""
+def _shift_coefficients(sigma, lam):
+    """The Taylor coefficients of ``C(dt)`` (a2 .. a5) and ``S(dt)`` (b3 .. b5) in
+    :func:`_shift_basis` (they depend on the piece only)."""
     s2 = sigma * sigma
     a2 = 0.5 * (s2 + lam)
     a3 = sigma * (s2 + 3.0 * lam) / 6.0
@@ -332,6 +330,22 @@ def _shift_basis(dt, sigma, lam, w, cc, ss, sn, cs):
     b3 = (3.0 * s2 + lam) / 6.0
     b4 = sigma * (s2 + lam) / 6.0
     b5 = (5.0 * s2 * s2 + 10.0 * s2 * lam + lam * lam) / 120.0
+    return a2, a3, a4, a5, b3, b4, b5
+
+
+@njit(cache=True, inline="always")
+def _shift_basis(dt, sigma, lam, w, cc, ss, sn, cs):
+    """The basis ``dt`` later (``|dt| * rate <= SHIFT_RAD``): ``C(t+dt) = C(dt)C(t) +
+    lam*S(dt)S(t)``, ``S(t+dt) = S(dt)C(t) + C(dt)S(t)`` (the fundamental solution of ``C' =
+    sigma*C + lam*S``, ``S' = sigma*S + C``) and the drive's angle addition, with ``C(dt)``,
+    ``S(dt)``, ``sin(w*dt)``, ``cos(w*dt)`` from their Taylor series to the fifth or sixth power."""
+    a2, a3, a4, a5, b3, b4, b5 = _shift_coefficients(sigma, lam)
+    return _shift_basis_by(dt, a2, a3, a4, a5, b3, b4, b5, sigma, lam, w, cc, ss, sn, cs)
+
+
+@njit(cache=True, inline="always")
+def _shift_basis_by(dt, a2, a3, a4, a5, b3, b4, b5, sigma, lam, w, cc, ss, sn, cs):
+    """:func:`_shift_basis` with the piece's coefficients (:func:`_shift_coefficients`) given."""
     c1 = 1.0 + dt * (sigma + dt * (a2 + dt * (a3 + dt * (a4 + dt * a5))))
     s1 = dt * (1.0 + dt * (sigma + dt * (b3 + dt * (b4 + dt * b5))))
     x = w * dt
@@ -420,7 +434,9 @@ BND_SIN_PHI = 6
 BND_COS_PHI = 7
 BND_BC0 = 8
 BND_BS0 = 9
-BND_WIDTH = 10
+BND_SHIFT = 10  # the piece's coefficients of _shift_basis (a2 .. a5, b3 .. b5: 7 columns)
+BND_SHIFT_MAX = 17  # the longest shift SHIFT_RAD allows on the piece
+BND_WIDTH = 18
 
 
 @njit(cache=True)
@@ -473,6 +489,10 @@ def piece_tables(pieces, n_pieces):
         bnd[k, BND_SIN_PHI], bnd[k, BND_COS_PHI] = _sincos(phi)
         bnd[k, BND_BC0] = bc
         bnd[k, BND_BS0] = bs
+        coefficients = _shift_coefficients(sigma, lam)
+        for j in range(7):
+            bnd[k, BND_SHIFT + j] = coefficients[j]
+        bnd[k, BND_SHIFT_MAX] = SHIFT_RAD / max(abs(sigma) + root, w, 1e-300)
         a = node_start[k]
         n = node_start[k + 1] - a
         for i in range(n):
@@ -1770,6 +1790,40 @@ def _march_group(
                     unsure = unsure or f_zero[j]
                 sp = 0  # pending right ends from splitting undecided cells (exact values)
                 while not unsure:
+                    if sp == 0 and i < nk - 1:
+                        # first the cells that their end values clear (the common case, and
+                        # _cell's first test, made on the same values): the slopes and
+                        # curvatures are not needed for them. The piece's last cell (its end is
+                        # the piece's, not a node) goes to the full test below.
+                        q = i
+                        sq = sa
+                        uq = u0
+                        while q < nk - 1:
+                            sbq = q * hk - ts
+                            wq = tab[base + q, fr]
+                            hq = sbq - sq
+                            clear = True
+                            for j in range(nfast):
+                                fa = f_sgn[j] * uq + f_c0[j] + f_c1[j] * sq
+                                fb = f_sgn[j] * wq + f_c0[j] + f_c1[j] * sbq
+                                if not (
+                                    fa > tol
+                                    and fb > tol
+                                    and min(fa, fb) - 0.125 * Bf * hq * hq > tol
+                                ):
+                                    clear = False
+                                    break
+                            if not clear:
+                                break
+                            uq = wq
+                            sq = sbq
+                            q += 1
+                        if q > i:
+                            i = q
+                            sa = sq
+                            u0 = tab[base + q - 1, fr]
+                            u1 = tab[base + q - 1, fr + 1]
+                            u2 = tab[base + q - 1, fr + 2]
                     if sp > 0:
                         sb = sp_s[sp - 1]
                         w0 = sp_v[sp - 1, 0]
@@ -1859,16 +1913,19 @@ def _march_group(
                         solved = False
                         # the second and later iterates are usually within SHIFT_RAD of the last:
                         # their basis is shifted from there
-                        shift_max = SHIFT_RAD / max(abs(sigma) + root, w, 1e-300)
+                        # (their bounds are not needed before the root: taken once, there)
+                        shift_max = bnd[k, BND_SHIFT_MAX]
                         x_b = np.nan  # where the basis values were taken
                         chain = 0
                         for _it in range(100):
                             tau = ts + x
                             if abs(x - x_b) <= shift_max and chain < SHIFT_CHAIN:
-                                cc, ss, sn, cs = _shift_basis(
-                                    x - x_b, sigma, lam, w, cc, ss, sn, cs
-                                )
-                                bc, bs = _basis_bounds(tau, sigma, lam, root, r1)
+                                cc, ss, sn, cs = _shift_basis_by(
+                                    x - x_b, bnd[k, BND_SHIFT], bnd[k, BND_SHIFT + 1],
+                                    bnd[k, BND_SHIFT + 2], bnd[k, BND_SHIFT + 3],
+                                    bnd[k, BND_SHIFT + 4], bnd[k, BND_SHIFT + 5],
+                                    bnd[k, BND_SHIFT + 6], sigma, lam, w, cc, ss, sn, cs,
+                                )  # fmt: skip
                                 chain += 1
                             else:
                                 cc, ss, sn, cs, bc, bs = _basis_all(
@@ -1903,6 +1960,8 @@ def _march_group(
                             x = xn
                         if not solved:
                             return STATUS_STUCK
+                        if chain > 0:
+                            bc, bs = _basis_bounds(tau, sigma, lam, root, r1)
                         s = x
                         hit = found
                     if ph == SLIP_FORWARD:
