@@ -45,10 +45,11 @@ parallel (numba ``prange``); group events are expanded to one event per part.
 
 from __future__ import annotations
 
+import contextlib
 import enum
 import functools
 import math
-from collections.abc import Callable, Sequence
+from collections.abc import Callable, Iterator, Sequence
 from dataclasses import dataclass, replace
 from typing import Any, Literal
 
@@ -881,11 +882,8 @@ class FeederSimulator:
             cap = 16 + 4 * nb
             # small passes run on one thread: a parallel region costs more than it saves
             # there (and OpenMP's spin-waiting is slow on a loaded machine)
-            threads = numba.get_num_threads()
             serial = G * nb < SMALL_PARALLEL_WORK
-            if serial:
-                numba.set_num_threads(1)
-            try:
+            with _one_thread_if(serial):
                 while True:
                     ev_t = np.empty((G, cap))
                     ev_kind = np.empty((G, cap), np.int8)
@@ -910,19 +908,17 @@ class FeederSimulator:
                             "at one instant without progress"
                         )
                     break
-                # the earlier events up to the pass's end (ties at the end: before the groups')
-                take = pre_left.copy() if final else pre_left & (pre_t <= t_stop)
-                pre_left &= ~take
-                # in order when first read; every argument is this pass's own copy (exit times
-                # as they are now: later passes and advances only add exits after this pass)
-                order_pass = functools.partial(
-                    _pass_events_in_time_order, serial,
-                    pre_t[take], pre_kind[take], pre_part[take],
-                    ev_t, ev_kind, ev_part, ev_n, members_before, m.exit_t.copy(),
-                )  # fmt: skip
-                chunks.append(order_pass)
-            finally:
-                numba.set_num_threads(threads)
+            # the earlier events up to the pass's end (ties at the end: before the groups')
+            take = pre_left.copy() if final else pre_left & (pre_t <= t_stop)
+            pre_left &= ~take
+            # in order when first read; every argument is this pass's own copy (exit times as
+            # they are now: later passes and advances only add exits after this pass)
+            order_pass = functools.partial(
+                _pass_events_in_time_order, serial,
+                pre_t[take], pre_kind[take], pre_part[take],
+                ev_t, ev_kind, ev_part, ev_n, members_before, m.exit_t.copy(),
+            )  # fmt: skip
+            chunks.append(order_pass)
             if final:
                 break
         return chunks
@@ -944,16 +940,24 @@ class FeederSimulator:
         }
 
 
-def _pass_events_in_time_order(serial: bool, *arrays: npt.NDArray[Any]) -> EventArrays:
-    """:func:`~feeder_ros.physics.sharp_solver.group_events_in_time_order` of one group pass, on
-    one thread if the pass ran on one (a small pass: see ``SMALL_PARALLEL_WORK``)."""
+@contextlib.contextmanager
+def _one_thread_if(serial: bool) -> Iterator[None]:
+    """numba's parallel kernels on one thread inside the block if ``serial`` (a small group pass:
+    see ``SMALL_PARALLEL_WORK``); the thread count is restored after it."""
     threads = numba.get_num_threads()
     if serial:
         numba.set_num_threads(1)
     try:
-        return _k.group_events_in_time_order(*arrays)
+        yield
     finally:
         numba.set_num_threads(threads)
+
+
+def _pass_events_in_time_order(serial: bool, *arrays: npt.NDArray[Any]) -> EventArrays:
+    """:func:`~feeder_ros.physics.sharp_solver.group_events_in_time_order` of one group pass, on
+    one thread if the pass ran on one."""
+    with _one_thread_if(serial):
+        return _k.group_events_in_time_order(*arrays)
 
 
 # zero-length arrays shared by every empty group and member table: no element to write, and code
@@ -995,7 +999,7 @@ class _Groups:
     _FIELDS = ("L", "D", "mass", "u", "y", "slip", "lead", "phase", "head")
 
     def copy(self) -> _Groups:
-        other = _Groups(0)
+        other = _Groups.empty()
         other.size = self.size
         for name in self._FIELDS:
             setattr(other, name, getattr(self, name).copy())
@@ -1062,7 +1066,7 @@ class _Members:
     _FIELDS = ("group", "next", "offset", "mass", "slip0", "exit_t", "start_t", "start_x")
 
     def copy(self) -> _Members:
-        other = _Members()
+        other = _Members.empty()
         other.size = self.size
         for name in self._FIELDS:
             setattr(other, name, getattr(self, name).copy())
