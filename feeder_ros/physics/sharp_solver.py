@@ -321,7 +321,8 @@ SHIFT_CHAIN = 3  # shifts in a row before a direct evaluation (round-off grows w
 @njit(cache=True, inline="always")
 def _shift_coefficients(sigma, lam):
     """The Taylor coefficients of ``C(dt)`` (a2 .. a5) and ``S(dt)`` (b3 .. b5) in
-    :func:`_shift_basis` (they depend on the piece only)."""
+    :func:`_shift_basis` (they depend on the piece only: the group march keeps them in its
+    tables)."""
     s2 = sigma * sigma
     a2 = 0.5 * (s2 + lam)
     a3 = sigma * (s2 + 3.0 * lam) / 6.0
@@ -334,18 +335,12 @@ def _shift_coefficients(sigma, lam):
 
 
 @njit(cache=True, inline="always")
-def _shift_basis(dt, sigma, lam, w, cc, ss, sn, cs):
+def _shift_basis(dt, a2, a3, a4, a5, b3, b4, b5, sigma, lam, w, cc, ss, sn, cs):
     """The basis ``dt`` later (``|dt| * rate <= SHIFT_RAD``): ``C(t+dt) = C(dt)C(t) +
     lam*S(dt)S(t)``, ``S(t+dt) = S(dt)C(t) + C(dt)S(t)`` (the fundamental solution of ``C' =
     sigma*C + lam*S``, ``S' = sigma*S + C``) and the drive's angle addition, with ``C(dt)``,
-    ``S(dt)``, ``sin(w*dt)``, ``cos(w*dt)`` from their Taylor series to the fifth or sixth power."""
-    a2, a3, a4, a5, b3, b4, b5 = _shift_coefficients(sigma, lam)
-    return _shift_basis_by(dt, a2, a3, a4, a5, b3, b4, b5, sigma, lam, w, cc, ss, sn, cs)
-
-
-@njit(cache=True, inline="always")
-def _shift_basis_by(dt, a2, a3, a4, a5, b3, b4, b5, sigma, lam, w, cc, ss, sn, cs):
-    """:func:`_shift_basis` with the piece's coefficients (:func:`_shift_coefficients`) given."""
+    ``S(dt)``, ``sin(w*dt)``, ``cos(w*dt)`` from their Taylor series to the fifth or sixth power
+    (the piece's coefficients ``a2 .. b5`` from :func:`_shift_coefficients`)."""
     c1 = 1.0 + dt * (sigma + dt * (a2 + dt * (a3 + dt * (a4 + dt * a5))))
     s1 = dt * (1.0 + dt * (sigma + dt * (b3 + dt * (b4 + dt * b5))))
     x = w * dt
@@ -1920,7 +1915,7 @@ def _march_group(
                         for _it in range(100):
                             tau = ts + x
                             if abs(x - x_b) <= shift_max and chain < SHIFT_CHAIN:
-                                cc, ss, sn, cs = _shift_basis_by(
+                                cc, ss, sn, cs = _shift_basis(
                                     x - x_b, bnd[k, BND_SHIFT], bnd[k, BND_SHIFT + 1],
                                     bnd[k, BND_SHIFT + 2], bnd[k, BND_SHIFT + 3],
                                     bnd[k, BND_SHIFT + 4], bnd[k, BND_SHIFT + 5],

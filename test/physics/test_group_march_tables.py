@@ -185,7 +185,7 @@ def test_shifted_basis_equals_the_direct_basis(sigma: float, lam: float) -> None
         phi = float(rng.uniform(-np.pi, np.pi))
         dt = float(rng.uniform(-1.0, 1.0)) * k.SHIFT_RAD / rate
         here = k._basis(tau, sigma, lam, root, r1, w, phi)
-        shifted = k._shift_basis(dt, sigma, lam, w, *here)
+        shifted = k._shift_basis(dt, *k._shift_coefficients(sigma, lam), sigma, lam, w, *here)
         direct = k._basis(tau + dt, sigma, lam, root, r1, w, phi)
         bc, bs = k._basis_bounds(min(tau, tau + dt), sigma, lam, root, r1)
         for got, want, scale in zip(shifted, direct, (bc, bs, 1.0, 1.0), strict=True):
