@@ -924,7 +924,10 @@ def advance(
     lam = 0.0
     root = 0.0
     r1 = 0.0
+    a2 = a3 = a4 = a5 = b3 = b4 = b5 = 0.0  # the piece's shift coefficients (_shift_basis)
+    shift_max = 0.0
     e_cc = e_ss = e_sn = e_cs = e_bc = e_bs = 0.0  # the basis (and bounds) at the last event
+    chain = e_chain = 0  # shifts since the basis (at the last event) was evaluated directly
     while True:
         if not cont:
             t0 = state[S_T]
@@ -983,6 +986,8 @@ def advance(
             r1 = 0.0
             if lam > 0.0:
                 r1 = (k / m) / (sigma - root)
+            a2, a3, a4, a5, b3, b4, b5 = _shift_coefficients(sigma, lam)
+            shift_max = SHIFT_RAD / max(abs(sigma) + root, w, 1e-300)
             if not _fill_rows(rows, sigma, lam, A, w, phi, m, c, k, F0, x0, v0, held):
                 counters[2] = STATUS_RESONANCE
                 return STATUS_RESONANCE
@@ -1072,6 +1077,7 @@ def advance(
 
         # ---- release functions that start on (or across) their zero (at ts; the part's
         # polynomials are in s = tau - ts)
+        chain = 0
         if ts == 0.0:
             cc = 1.0
             ss = 0.0
@@ -1080,6 +1086,7 @@ def advance(
         elif cont:
             # after a part event: the basis at the event (the stop that found it)
             cc, ss, sn, cs, bc, bs = e_cc, e_ss, e_sn, e_cs, e_bc, e_bs
+            chain = e_chain
         else:
             cc, ss, sn, cs, bc, bs = _basis_all(ts, sigma, lam, root, r1, w, phi)
         stick_bound = _row_bound(rows, 2, bc, bs)
@@ -1134,6 +1141,7 @@ def advance(
                 r_R[r] = math.sqrt(rows[r, 0] ** 2 + (rows[r, 1] / root) ** 2)
         tau = ts
         e_cc, e_ss, e_sn, e_cs, e_bc, e_bs = cc, ss, sn, cs, bc, bs
+        e_chain = chain
         if hit < 0:
             for r in range(6):
                 vals[r] = 0.0
@@ -1142,16 +1150,30 @@ def advance(
             const_bounds = sigma == 0.0 and lam < 0.0
             bounds_done = False
             at_ts = True  # the first stop is ts, whose basis values are those of the release
+            tau_b = ts  # where the basis values were taken
+            new_bounds = True  # bc, bs changed since the row bounds were formed
             while True:
                 if not at_ts:
-                    cc, ss, sn, cs, bc, bs = _basis_all(tau, sigma, lam, root, r1, w, phi)
+                    if tau - tau_b <= shift_max and chain < SHIFT_CHAIN:
+                        # a short step (near a root): the basis shifted from the last stop; its
+                        # bounds over [tau_b, inf) hold over [tau, inf) too
+                        cc, ss, sn, cs = _shift_basis(
+                            tau - tau_b, a2, a3, a4, a5, b3, b4, b5, sigma, lam, w, cc, ss, sn, cs
+                        )
+                        chain += 1
+                    else:
+                        cc, ss, sn, cs, bc, bs = _basis_all(tau, sigma, lam, root, r1, w, phi)
+                        chain = 0
+                        new_bounds = True
+                    tau_b = tau
                 at_ts = False
                 if held:
                     vals[0] = rows[0, 4]
                     bnds[0] = abs(rows[0, 4])
                 for r in range(lo, hi_r):
                     vals[r] = _row(rows, r, cc, ss, sn, cs)
-                if not bounds_done:
+                if new_bounds and not bounds_done:
+                    new_bounds = False
                     for r in range(lo, hi_r):
                         bh = r_abs_a[r] * bc + r_abs_b[r] * bs
                         bR = r_R[r] * bc
@@ -1204,6 +1226,7 @@ def advance(
                 if hit >= 0:
                     tau_e = tau
                     e_cc, e_ss, e_sn, e_cs, e_bc, e_bs = cc, ss, sn, cs, bc, bs
+                    e_chain = chain
                     break
                 if t_next >= T:
                     tau_e = T
