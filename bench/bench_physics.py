@@ -36,7 +36,7 @@ import time
 from collections.abc import Callable
 from dataclasses import dataclass
 from pathlib import Path
-from typing import TypeVar
+from typing import Any, TypeVar
 
 import numpy as np
 from scipy.integrate import solve_ivp
@@ -63,8 +63,13 @@ from feeder_ros.physics.smooth_model import (  # noqa: E402
 RATE_HZ = 1000.0
 DAMPING = 30.0  # N*s/m: damping ratio 0.7 % forward, 3.7 % backward
 BETA = 1e6
-ENGINE_REPEATS = 7  # runs of a few milliseconds: the best of several
-BASELINE_REPEATS = 3
+# The engine's and the baseline's runs are taken in turn, ROUNDS rounds of ENGINE_REPEATS engine
+# runs (a few milliseconds each) and one baseline run, and each keeps its best: this machine's
+# speed drifts by tens of per cent over seconds, and runs taken one after the other would put the
+# engine and the baseline in different phases of it
+ROUNDS = 5
+ENGINE_REPEATS = 7
+MANY_ROUNDS = 5  # the same for the many-parts rows (one run of each kind per round)
 
 
 @dataclass(frozen=True)
@@ -164,6 +169,23 @@ def timed(call: Callable[[], T], repeats: int = 1) -> tuple[T, float]:
     return result, best
 
 
+def timed_in_turn(
+    calls: list[tuple[Callable[[], Any], int]], rounds: int
+) -> list[tuple[Any, float]]:
+    """Each call's last result and its best wall time, the calls taken in turn: in each of
+    ``rounds`` rounds every call runs its ``repeats`` times (``calls`` holds ``(call,
+    repeats)``). A slow phase of the machine then falls on all of them alike."""
+    results: list[Any] = [None] * len(calls)
+    best = [math.inf] * len(calls)
+    for _ in range(rounds):
+        for i, (call, repeats) in enumerate(calls):
+            for _ in range(repeats):
+                started = time.perf_counter()
+                results[i] = call()
+                best[i] = min(best[i], time.perf_counter() - started)
+    return list(zip(results, best, strict=True))
+
+
 def from_result(solver: str, result: SimulationResult, wall: float, note: str = "") -> Row:
     return Row(
         solver,
@@ -180,16 +202,19 @@ def run_case(case: Case) -> tuple[list[Row], Carrier]:
     logistic = params.with_changes(stiffness_model="logistic", logistic_beta_per_m=BETA)
     parts = (PartSpec(),)
     rows = []
-    result, wall = timed(
-        lambda: simulate(params, case.duration_s, RATE_HZ, parts=parts), ENGINE_REPEATS
+    (result, wall), (carrier, baseline_wall) = timed_in_turn(
+        [
+            (lambda: simulate(params, case.duration_s, RATE_HZ, parts=parts), ENGINE_REPEATS),
+            (
+                lambda: solve_logistic_carrier(
+                    logistic, case.duration_s, options=SolverOptions.ode45_default()
+                ),
+                1,
+            ),
+        ],
+        ROUNDS,
     )
     rows.append(from_result("exact engine (sharp)", result, wall))
-    carrier, baseline_wall = timed(
-        lambda: solve_logistic_carrier(
-            logistic, case.duration_s, options=SolverOptions.ode45_default()
-        ),
-        BASELINE_REPEATS,
-    )
     x, v, _ = carrier.state(result.t_s)
     rows.append(
         Row(
@@ -303,17 +328,23 @@ def many_parts(duration_s: float, count: int) -> list[str]:
         f"#### {count} parts on one carrier (A = 40 N, undamped, {duration_s:g} s, output 100 Hz)",
         "",
         "The run's events are put in one time-ordered list when first read (`EventLog`): 'wall'",
-        "is `simulate()`, 'events read' the first read of a fresh result's events (best of 3",
-        "each), and the last ratio counts both.",
+        "is `simulate()` (best of "
+        f"{MANY_ROUNDS}, the two kinds run in turn), 'events read' the first read of a fresh",
+        "result's events (best of 3), and the last ratio counts both.",
         "",
         "| parts | wall [s] | sim s / wall s | events read [s] | sim s / wall s, events read "
         "| events | mean part speed [mm/s] | slip fraction |",
         "| --- | ---: | ---: | ---: | ---: | ---: | ---: | ---: |",
     ]
-    for label, parts in (("one part type", same), ("all-distinct frictions", distinct)):
-        result, wall = timed(
-            lambda parts=parts: simulate(params, duration_s, 100.0, parts=parts), 3
-        )
+    kinds = (("one part type", same), ("all-distinct frictions", distinct))
+    runs = timed_in_turn(
+        [
+            (lambda parts=parts: simulate(params, duration_s, 100.0, parts=parts), 1)
+            for _, parts in kinds
+        ],
+        MANY_ROUNDS,
+    )
+    for (label, parts), (result, wall) in zip(kinds, runs, strict=True):
         read = math.inf
         for _ in range(3):
             fresh = simulate(params, duration_s, 100.0, parts=parts)
@@ -499,9 +530,10 @@ def main(argv: list[str] | None = None) -> int:
         "default tolerances on the logistic carrier alone (no part, no event location), so the "
         "ratio is conservative for the engine, which also simulates the part and locates every "
         "event. The other logistic rows include the part (events located on the dense output). "
-        f"Wall times: best of {ENGINE_REPEATS} runs for the engine, of {BASELINE_REPEATS} for "
-        "the baseline and of 3 for the many-parts rows (timeit's convention), single runs for "
-        "the other solvers.",
+        f"Wall times: the engine and the baseline run in turn, {ROUNDS} rounds of "
+        f"{ENGINE_REPEATS} engine runs and one baseline run, and each keeps its best "
+        "(timeit's convention; the machine's speed drifts over seconds, and a slow phase then "
+        "falls on both); single runs for the other solvers.",
         "",
     ]
     for case in cases:
