@@ -1962,16 +1962,43 @@ def _march_group(
                                 solved = True
                                 break
                             xn = np.nan
+                            halley = False
                             if d != 0.0:
                                 dn = f / d
                                 den = 1.0 - 0.5 * dn * f2 / d  # Halley's correction
-                                xn = x - (dn / den if den > 0.5 else dn)
+                                halley = den > 0.5
+                                xn = x - (dn / den if halley else dn)
                             t_res = 8.0 * EPS * (abs(t0) + tau + 1e-3)
-                            if abs(xn - x) <= t_res:
+                            dx = abs(xn - x)
+                            if dx <= t_res:
                                 solved = True  # converged (its step may leave the bracket)
                                 break
                             if not lo < xn < hi:
                                 xn = 0.5 * (lo + hi)
+                            elif halley and dx <= shift_max:
+                                # Halley's error goes as (c2^2 - c3)*e^3 (c_k = f^(k)/(k!*f')):
+                                # bounded with |f'''| <= B3f, four times over, within t_res, the
+                                # step lands on the root: taken without evaluating there again
+                                c2 = 0.5 * f2 / d
+                                if 4.0 * (c2 * c2 + B3f / (6.0 * abs(d))) * dx * dx * dx <= t_res:
+                                    if chain < SHIFT_CHAIN:
+                                        cc, ss, sn, cs = _shift_basis(
+                                            xn - x, bnd[k, BND_SHIFT], bnd[k, BND_SHIFT + 1],
+                                            bnd[k, BND_SHIFT + 2], bnd[k, BND_SHIFT + 3],
+                                            bnd[k, BND_SHIFT + 4], bnd[k, BND_SHIFT + 5],
+                                            bnd[k, BND_SHIFT + 6], sigma, lam, w, cc, ss, sn, cs,
+                                        )  # fmt: skip
+                                        chain += 1
+                                        tau = ts + xn
+                                    else:
+                                        tau = ts + xn
+                                        cc, ss, sn, cs, bc, bs = _basis_all(
+                                            tau, sigma, lam, root, r1, w, phi
+                                        )
+                                        chain = 0
+                                    x = xn
+                                    solved = True
+                                    break
                             if hi - lo <= t_res:
                                 solved = True
                                 break
