@@ -1935,6 +1935,7 @@ def _march_group(
                         shift_max = bnd[k, BND_SHIFT_MAX]
                         x_b = np.nan  # where the basis values were taken
                         chain = 0
+                        landed = False  # x is the root (the last step's error bound)
                         for _it in range(100):
                             tau = ts + x
                             if abs(x - x_b) <= shift_max and chain < SHIFT_CHAIN:
@@ -1951,6 +1952,9 @@ def _march_group(
                                 )
                                 chain = 0
                             x_b = x
+                            if landed:
+                                solved = True
+                                break
                             f = sg * _row(rows, fr, cc, ss, sn, cs) + c0 + c1 * x
                             d = sg * _row(rows, fr + 1, cc, ss, sn, cs) + c1
                             f2 = sg * _row(rows, fr + 2, cc, ss, sn, cs)
@@ -1978,27 +1982,11 @@ def _march_group(
                             elif halley and dx <= shift_max:
                                 # Halley's error goes as (c2^2 - c3)*e^3 (c_k = f^(k)/(k!*f')):
                                 # bounded with |f'''| <= B3f, four times over, within t_res, the
-                                # step lands on the root: taken without evaluating there again
+                                # step lands on the root: only its basis is taken there
                                 c2 = 0.5 * f2 / d
-                                if 4.0 * (c2 * c2 + B3f / (6.0 * abs(d))) * dx * dx * dx <= t_res:
-                                    if chain < SHIFT_CHAIN:
-                                        cc, ss, sn, cs = _shift_basis(
-                                            xn - x, bnd[k, BND_SHIFT], bnd[k, BND_SHIFT + 1],
-                                            bnd[k, BND_SHIFT + 2], bnd[k, BND_SHIFT + 3],
-                                            bnd[k, BND_SHIFT + 4], bnd[k, BND_SHIFT + 5],
-                                            bnd[k, BND_SHIFT + 6], sigma, lam, w, cc, ss, sn, cs,
-                                        )  # fmt: skip
-                                        chain += 1
-                                        tau = ts + xn
-                                    else:
-                                        tau = ts + xn
-                                        cc, ss, sn, cs, bc, bs = _basis_all(
-                                            tau, sigma, lam, root, r1, w, phi
-                                        )
-                                        chain = 0
-                                    x = xn
-                                    solved = True
-                                    break
+                                landed = (
+                                    4.0 * (c2 * c2 + B3f / (6.0 * abs(d))) * dx * dx * dx <= t_res
+                                )
                             if hi - lo <= t_res:
                                 solved = True
                                 break
