@@ -22,7 +22,7 @@ import subprocess
 import sys
 import threading
 import time
-from collections.abc import Callable
+from collections.abc import Callable, Iterable, Sequence
 from dataclasses import dataclass, field
 from pathlib import Path
 from typing import Any
@@ -32,13 +32,18 @@ import rclpy
 from diagnostic_msgs.msg import DiagnosticArray
 from rclpy.context import Context
 from rclpy.executors import MultiThreadedExecutor
+from rclpy.node import Node
 from rclpy.qos import QoSProfile, ReliabilityPolicy
 
+from feeder_ros.cell import load_cell
 from feeder_ros.msg import DriveState, PartExit, PartStateArray, SpeedStatus, VehicleEstimate
 
 REPO = Path(__file__).resolve().parents[1]
 RELIABLE = QoSProfile(depth=1000, reliability=ReliabilityPolicy.RELIABLE)
 LEVELS = ("OK", "WARN", "ERROR", "STALE")
+# how long the cell's nodes may take to appear: a cold start (no bytecode cache, every module
+# read from a slow disk) has taken over 50 s on the project's machine type, a warm one 3 s
+STARTUP_LIMIT_S = 180.0
 
 
 def _seconds(stamp: Any) -> float:
@@ -83,6 +88,24 @@ class Recording:
                 callback(message)
 
         return locked
+
+
+def wait_for_nodes(
+    node: Node, expected: Iterable[str], limit_s: float, alive: Callable[[], bool]
+) -> list[str]:
+    """Wait until every node in ``expected`` (fully qualified names) is in the ROS graph, for
+    at most ``limit_s`` or while ``alive()``; returns the ones still missing (sorted)."""
+    wanted = set(expected)
+    deadline = time.monotonic() + limit_s
+    while True:
+        present = {
+            f"{namespace.rstrip('/')}/{name}"
+            for name, namespace in node.get_node_names_and_namespaces()
+        }
+        missing = sorted(wanted - present)
+        if not missing or time.monotonic() >= deadline or not alive():
+            return missing
+        time.sleep(0.1)
 
 
 def _probe(namespace: str, recording: Recording) -> tuple[Context, Any, threading.Thread]:
@@ -185,16 +208,29 @@ def summarise(recording: Recording, timeline: list[dict[str, Any]], out: Path) -
 
 
 def problems(
-    summary: dict[str, Any], controller_code: int, cell_code: int, expected_error: str
+    summary: dict[str, Any],
+    controller_code: int | None,
+    cell_code: int,
+    expected_error: str,
+    missing_nodes: Sequence[str] = (),
 ) -> list[str]:
     """Why the demo did not show a working cell (empty: it did).
 
-    The cell works when the controller and the cell exit cleanly, the speed monitor judges every
-    target-speed phase OK with an estimate in it, parts leave the track, the watchdog trips when
-    the controller's heartbeat stops, and no node reports ERROR (or STALE) except
-    ``expected_error``, the drive interface's status that the watchdog trip raises."""
+    The cell works when all its nodes come up (``missing_nodes`` names those that did not; the
+    controller is then not started: ``controller_code`` None), the controller and the cell exit
+    cleanly, the speed monitor judges every target-speed phase OK with an estimate in it, parts
+    leave the track, the watchdog trips when the controller's heartbeat stops, and no node
+    reports ERROR (or STALE) except ``expected_error``, the drive interface's status that the
+    watchdog trip raises."""
     found = []
-    if controller_code != 0:
+    if missing_nodes:
+        found.append(
+            f"the cell's nodes did not all come up within {STARTUP_LIMIT_S:g} s: missing "
+            + ", ".join(missing_nodes)
+        )
+    if controller_code is None:
+        found.append("the cell controller was not started")
+    elif controller_code != 0:
         found.append(f"the cell controller exited with status {controller_code}")
     if cell_code != 0:
         found.append(f"the cell (feeder cell) exited with status {cell_code}")
@@ -276,17 +312,29 @@ def main(argv: list[str] | None = None) -> int:
 
     recording = Recording()
     context, executor, thread = _probe(args.namespace, recording)
+    expected = [launch.fully_qualified_name for launch in load_cell(args.cell).nodes]
     cell = subprocess.Popen([str(bin_dir / "feeder"), "cell", "--config", str(args.cell)])
     timeline_file = args.output / "controller_timeline.json"
+    controller_code: int | None = None  # None: not started (the cell did not come up)
+    missing: list[str] = []
     try:
-        controller = subprocess.run(
-            [
-                sys.executable, str(REPO / "examples" / "cell_controller.py"),
-                "--namespace", args.namespace, "--hold", str(args.hold),
-                "--timeline", str(timeline_file),
-            ],
-            timeout=600,
-        )  # fmt: skip
+        print(
+            f"[demo] waiting for the cell's {len(expected)} nodes (at most {STARTUP_LIMIT_S:g} s)",
+            flush=True,
+        )
+        missing = wait_for_nodes(
+            executor.get_nodes()[0], expected, STARTUP_LIMIT_S, lambda: cell.poll() is None
+        )
+        if not missing:
+            print(f"[demo] the cell is up after {time.monotonic() - started:.1f} s", flush=True)
+            controller_code = subprocess.run(
+                [
+                    sys.executable, str(REPO / "examples" / "cell_controller.py"),
+                    "--namespace", args.namespace, "--hold", str(args.hold),
+                    "--timeline", str(timeline_file),
+                ],
+                timeout=600,
+            ).returncode  # fmt: skip
     finally:
         with recording.lock:
             recording.collecting_diagnostics = False
@@ -327,7 +375,7 @@ def main(argv: list[str] | None = None) -> int:
     print(f"plots: {', '.join(str(p) for p in plots)}; data: {args.output / 'summary.json'}")
     print(f"demo took {time.monotonic() - started:.0f} s")
     found = problems(
-        summary, controller.returncode, cell_code, f"{args.namespace}/drive_interface: drive"
+        summary, controller_code, cell_code, f"{args.namespace}/drive_interface: drive", missing
     )
     if found:
         print("DEMO FAILED: the cell did not work as the demo expects:")

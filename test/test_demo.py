@@ -3,10 +3,14 @@
 from __future__ import annotations
 
 import json
+import time
 from pathlib import Path
 from typing import Any
 
-from feeder_ros.demo import Recording, problems, summarise
+import rclpy
+from ros_test_tools import probe_node
+
+from feeder_ros.demo import STARTUP_LIMIT_S, Recording, problems, summarise, wait_for_nodes
 
 NS = "/demo_cell/feeder_1"
 DRIVE = f"{NS}/drive_interface: drive"
@@ -132,3 +136,42 @@ def test_diagnostics_after_the_cell_is_told_to_stop_are_not_kept() -> None:
     recording.note_diagnostic(ESTIMATE, 2, "sensor timeout: no accelerometer sample for 1.2 s", 2.0)
     assert recording.diagnostics == {ESTIMATE: 0}
     assert recording.diagnostic_messages == {ESTIMATE: "estimating"}
+
+
+def test_a_cell_whose_nodes_did_not_come_up_is_named_and_its_controller_not_counted(
+    tmp_path: Path,
+) -> None:
+    missing = [f"{NS}/drive_interface", f"{NS}/speed_monitor"]
+    found = problems(_run(tmp_path), None, 0, DRIVE, missing)
+    assert found == [
+        f"the cell's nodes did not all come up within {STARTUP_LIMIT_S:g} s: missing "
+        f"{NS}/drive_interface, {NS}/speed_monitor",
+        "the cell controller was not started",
+    ]
+
+
+def test_waiting_for_nodes_returns_once_they_are_in_the_graph_and_names_the_missing() -> None:
+    with probe_node("demo_wait_probe") as probe:
+        context = rclpy.Context()
+        rclpy.init(context=context)
+        node = rclpy.create_node("cell_node", namespace="/demo_wait/feeder_9", context=context)
+        try:
+            started = time.monotonic()
+            assert (
+                wait_for_nodes(probe, ["/demo_wait/feeder_9/cell_node"], 30.0, lambda: True) == []
+            )
+            assert time.monotonic() - started < 30.0
+            # a node that never comes: named after the limit
+            started = time.monotonic()
+            absent = ["/demo_wait/feeder_9/cell_node", "/demo_wait/feeder_9/never"]
+            assert wait_for_nodes(probe, absent, 0.5, lambda: True) == ["/demo_wait/feeder_9/never"]
+            assert 0.5 <= time.monotonic() - started < 10.0
+            # a cell process that has exited: no waiting for the limit
+            started = time.monotonic()
+            assert wait_for_nodes(probe, absent, 60.0, lambda: False) == [
+                "/demo_wait/feeder_9/never"
+            ]
+            assert time.monotonic() - started < 10.0
+        finally:
+            node.destroy_node()
+            rclpy.shutdown(context=context)
