@@ -1148,7 +1148,6 @@ def advance(
                 bnds[r] = 0.0
             # undamped: the basis bounds (1, 1/root) and so the row bounds are constant
             const_bounds = sigma == 0.0 and lam < 0.0
-            bounds_done = False
             at_ts = True  # the first stop is ts, whose basis values are those of the release
             tau_b = ts  # where the basis values were taken
             new_bounds = True  # bc, bs changed since the row bounds were formed
@@ -1164,7 +1163,7 @@ def advance(
                     else:
                         cc, ss, sn, cs, bc, bs = _basis_all(tau, sigma, lam, root, r1, w, phi)
                         chain = 0
-                        new_bounds = True
+                        new_bounds = not const_bounds
                     tau_b = tau
                 at_ts = False
                 if held:
@@ -1172,14 +1171,13 @@ def advance(
                     bnds[0] = abs(rows[0, 4])
                 for r in range(lo, hi_r):
                     vals[r] = _row(rows, r, cc, ss, sn, cs)
-                if new_bounds and not bounds_done:
+                if new_bounds:
                     new_bounds = False
                     for r in range(lo, hi_r):
                         bh = r_abs_a[r] * bc + r_abs_b[r] * bs
                         bR = r_R[r] * bc
                         hbnds[r] = bh if bh < bR else bR
                         bnds[r] = hbnds[r] + r_amp[r] + abs(rows[r, 4])
-                    bounds_done = const_bounds
                 t_res = 8.0 * EPS * (abs(t0) + tau + 1e-3)
                 # the next stop: each function is provably positive before f_skip[i] (its release
                 # offset, or the end of its last safe step), so only the functions whose interval
