@@ -335,6 +335,12 @@ def _shift_coefficients(sigma, lam):
 
 
 @njit(cache=True, inline="always")
+def _shift_max(sigma, root, w):
+    """The longest shift :func:`_shift_basis` takes on a piece: SHIFT_RAD of its fastest rate."""
+    return SHIFT_RAD / max(abs(sigma) + root, w, 1e-300)
+
+
+@njit(cache=True, inline="always")
 def _shift_basis(dt, a2, a3, a4, a5, b3, b4, b5, sigma, lam, w, cc, ss, sn, cs):
     """The basis ``dt`` later (``|dt| * rate <= SHIFT_RAD``): ``C(t+dt) = C(dt)C(t) +
     lam*S(dt)S(t)``, ``S(t+dt) = S(dt)C(t) + C(dt)S(t)`` (the fundamental solution of ``C' =
@@ -487,7 +493,7 @@ def piece_tables(pieces, n_pieces):
         coefficients = _shift_coefficients(sigma, lam)
         for j in range(7):
             bnd[k, BND_SHIFT + j] = coefficients[j]
-        bnd[k, BND_SHIFT_MAX] = SHIFT_RAD / max(abs(sigma) + root, w, 1e-300)
+        bnd[k, BND_SHIFT_MAX] = _shift_max(sigma, root, w)
         a = node_start[k]
         n = node_start[k + 1] - a
         for i in range(n):
@@ -987,7 +993,7 @@ def advance(
             if lam > 0.0:
                 r1 = (k / m) / (sigma - root)
             a2, a3, a4, a5, b3, b4, b5 = _shift_coefficients(sigma, lam)
-            shift_max = SHIFT_RAD / max(abs(sigma) + root, w, 1e-300)
+            shift_max = _shift_max(sigma, root, w)
             if not _fill_rows(rows, sigma, lam, A, w, phi, m, c, k, F0, x0, v0, held):
                 counters[2] = STATUS_RESONANCE
                 return STATUS_RESONANCE
