@@ -11,7 +11,7 @@ from collections.abc import Callable
 from dataclasses import dataclass, field
 from typing import Protocol
 
-__all__ = ["BackendStatus", "DriveBackend", "DriveOutput", "SimBackend"]
+__all__ = ["NO_SIMULATOR", "BackendStatus", "DriveBackend", "DriveOutput", "SimBackend"]
 
 
 @dataclass(frozen=True)
@@ -56,14 +56,26 @@ class DriveBackend(Protocol):
         ...
 
 
+#: the sim backend's warning while nothing reads its commands
+NO_SIMULATOR = "no subscriber on drive/command: is the platform simulator running?"
+
+
 class SimBackend:
     """The platform simulator: every output is published as a freshly stamped DriveCommand by the
-    ``publish`` callable the node supplies (the simulator treats an old command as a stop)."""
+    ``publish`` callable the node supplies (the simulator treats an old command as a stop).
+
+    ``listeners`` (optional) counts the subscriptions matched to that publisher. The link is up
+    once connected (commands go out, and a simulator that joins later follows the fresh stream),
+    but while nothing listens the status carries the warning :data:`NO_SIMULATOR`: a drive
+    interface left without its simulator must not look like a running feeder."""
 
     name = "sim"
 
-    def __init__(self, publish: Callable[[DriveOutput], None]) -> None:
+    def __init__(
+        self, publish: Callable[[DriveOutput], None], listeners: Callable[[], int] | None = None
+    ) -> None:
         self._publish = publish
+        self._listeners = listeners
         self._connected = False
         self._last: DriveOutput | None = None
 
@@ -82,7 +94,13 @@ class SimBackend:
                 f"enabled={self._last.enabled} {self._last.frequency_hz:.3f} Hz "
                 f"{self._last.amplitude_percent:.2f} %"
             )
-        return BackendStatus(connected=self._connected, details=details)
+        warning = ""
+        if self._listeners is not None:
+            count = self._listeners()
+            details["drive/command subscribers"] = str(count)
+            if self._connected and count == 0:
+                warning = NO_SIMULATOR
+        return BackendStatus(connected=self._connected, warning=warning, details=details)
 
     def disconnect(self) -> None:
         if self._connected and self._last is not None:

@@ -99,7 +99,8 @@ INTERFACE = NodeInterface(
             "diagnostic_msgs/msg/DiagnosticArray",
             "reliable, depth 10",
             "OK/WARN/ERROR with state, output, heartbeat age and backend link details, "
-            "resonance tracking (WARN while it holds on stale feedback)",
+            "resonance tracking (WARN while it holds on stale feedback); sim backend: WARN "
+            "while nothing subscribes to drive/command",
         ),
     ),
     subscribes=(
@@ -284,7 +285,9 @@ class DriveInterface(LifecycleNode):
         )
         if values["backend"] == "sim":
             self._command_pub = self.create_publisher(DriveCommand, "drive/command", RELIABLE)
-            self._backend = SimBackend(self._publish_command)
+            self._backend = SimBackend(
+                self._publish_command, self._command_pub.get_subscription_count
+            )
         else:
             self._backend = ModbusTcpBackend(
                 modbus_settings_from(values), register_map_from(values)
@@ -609,6 +612,8 @@ class DriveInterface(LifecycleNode):
             level, summary = DiagnosticStatus.ERROR, f"backend: {status.fault}"
         elif not status.connected:
             level, summary = DiagnosticStatus.WARN, "backend not connected"
+        elif status.warning:
+            level, summary = DiagnosticStatus.WARN, f"{summary}; backend: {status.warning}"
         elif not controller.watchdog.alive(now):
             level, summary = DiagnosticStatus.WARN, f"{summary}; no heartbeat"
         out = self._last_output
@@ -627,6 +632,7 @@ class DriveInterface(LifecycleNode):
             "speed model": self._speed_source,
             "backend connected": str(status.connected),
             "backend fault": status.fault,
+            "backend warning": status.warning,
             **status.details,
         }
         if status.actual_frequency_hz is not None:
@@ -706,6 +712,8 @@ class DriveInterface(LifecycleNode):
             return response
         answer = controller.start(self._now())
         response.success, response.message = answer.success, answer.message
+        if answer.success and status.warning:
+            response.message = f"{answer.message} (backend: {status.warning})"
         return response
 
     def _on_stop(self, request: Trigger.Request, response: Trigger.Response) -> Any:

@@ -56,22 +56,27 @@ def stamp_s(header: Header) -> float:
 class Cell:
     """A probe acting as the cell controller for the drive interface in ``namespace``."""
 
-    def __init__(self, probe: Node, namespace: str) -> None:
+    def __init__(self, probe: Node, namespace: str, listen: bool = True) -> None:
         self.probe = probe
         self.ns = namespace
         self.commands: list[DriveCommand] = []
         self.states: list[DriveState] = []
         self.diagnostics: list[DiagnosticArray] = []
         self._lock = threading.Lock()
-        probe.create_subscription(
-            DriveCommand, f"{namespace}/drive/command", self._command, RELIABLE
-        )
+        if listen:
+            self.listen_to_commands()
         probe.create_subscription(DriveState, f"{namespace}/drive/state", self._state, RELIABLE)
         probe.create_subscription(DiagnosticArray, "/diagnostics", self._diagnostic, RELIABLE)
         self._heartbeat_pub = probe.create_publisher(Header, f"{namespace}/heartbeat", 10)
         self.beating = False
         self.last_beat_s = math.nan
         probe.create_timer(0.1, self._beat)
+
+    def listen_to_commands(self) -> None:
+        """Subscribe to drive/command (as the platform simulator does)."""
+        self.probe.create_subscription(
+            DriveCommand, f"{self.ns}/drive/command", self._command, RELIABLE
+        )
 
     def _command(self, message: DriveCommand) -> None:
         with self._lock:
@@ -169,14 +174,16 @@ class Cell:
 
 
 @contextmanager
-def drive_node(namespace: str, *params: str, params_file: Path | None = None) -> Iterator[Cell]:
+def drive_node(
+    namespace: str, *params: str, params_file: Path | None = None, listen: bool = True
+) -> Iterator[Cell]:
     command = [DRIVE, "--ros-args", "-r", f"__ns:={namespace}"]
     if params_file is not None:
         command += ["--params-file", str(params_file)]
     for param in params:
         command += ["-p", param]
     with running(command) as process, probe_node() as probe:
-        cell = Cell(probe, namespace)
+        cell = Cell(probe, namespace, listen)
         visible = wait_until(
             lambda: (NODE, namespace) in probe.get_node_names_and_namespaces(), 30.0
         )
@@ -403,6 +410,46 @@ def test_ramps_stop_estop_and_deactivate_on_the_wire() -> None:
         time.sleep(1.0)
         assert len(cell.commands) == count
         assert cell.set_drive(30.0, 10.0, 0.0).result == SetDrive.Response.REFUSED
+
+
+def test_sim_backend_warns_while_no_simulator_listens() -> None:
+    ns = "/drive_alone"
+    with drive_node(ns, *FAST, "diagnostics_period_s:=0.2", listen=False) as cell:
+        cell.bring_up()
+        cell.start_heartbeat()
+
+        def values() -> dict[str, str]:
+            status = cell.last_diagnostic()
+            return {} if status is None else {kv.key: kv.value for kv in status.values}
+
+        assert wait_until(lambda: values().get("drive/command subscribers") == "0", 10.0)
+        status = cell.last_diagnostic()
+        assert status.level == DiagnosticStatus.WARN
+        assert status.message == (
+            "idle; backend: no subscriber on drive/command: is the platform simulator running?"
+        )
+        assert values()["backend connected"] == "True"
+        assert cell.set_drive(30.0, 10.0, 0.0).result == SetDrive.Response.ACCEPTED
+        started = cell.trigger("start")  # allowed: a simulator that joins follows the stream
+        assert started.success, started.message
+        assert started.message.endswith(
+            "(backend: no subscriber on drive/command: is the platform simulator running?)"
+        )
+        cell.wait_state(DriveState.STATE_RUNNING)
+
+        # a simulator (here the probe) subscribes: the warning clears, the commands arrive
+        cell.listen_to_commands()
+        assert wait_until(
+            lambda: (
+                values().get("drive/command subscribers") == "1"
+                and cell.last_diagnostic().level == DiagnosticStatus.OK
+            ),
+            10.0,
+        )
+        assert cell.last_diagnostic().message == "running"
+        assert values()["backend warning"] == ""
+        assert wait_until(lambda: bool(cell.commands) and cell.commands[-1].enabled, 10.0)
+        assert cell.commands[-1].amplitude_percent == 10.0
 
 
 def test_watchdog_trips_within_its_timeout_and_ramps_to_zero() -> None:
