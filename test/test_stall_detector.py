@@ -6,7 +6,8 @@ import math
 
 import pytest
 
-from feeder_ros.nodes.stall_detector import StallDetector
+from feeder_ros.monitoring.speed_monitor import Alarm, MonitorConfig, SpeedMonitor
+from feeder_ros.nodes.stall_detector import MIDDLEWARE_CATCH_UP_S, StallDetector
 
 
 def test_on_time_ticks_are_no_stall() -> None:
@@ -42,3 +43,53 @@ def test_a_node_starved_for_good_judges_every_other_tick() -> None:
 def test_bad_periods_are_refused(period: float, slack: float, text: str) -> None:
     with pytest.raises(ValueError, match=text):
         StallDetector(period, slack)
+
+
+@pytest.mark.parametrize("catch_up", [-1.0, math.nan, math.inf])
+def test_a_bad_catch_up_is_refused(catch_up: float) -> None:
+    with pytest.raises(ValueError, match=f"catch_up_s={catch_up!r}"):
+        StallDetector(0.5, catch_up_s=catch_up)
+
+
+def test_the_catch_up_follows_a_reported_stall_on_the_same_clock() -> None:
+    detector = StallDetector(0.5, catch_up_s=3.0)
+    assert not detector.stalled(10.0)
+    assert not detector.catching_up(10.0)  # no stall yet: nothing to catch up
+    assert detector.stalled(12.6)
+    assert [detector.catching_up(t) for t in (12.6, 13.1, 15.5)] == [True, True, True]
+    assert not detector.catching_up(15.6)  # 3 s after the stalled tick
+    assert not detector.stalled(13.1)
+    assert StallDetector(0.5).catch_up_s == MIDDLEWARE_CATCH_UP_S
+
+
+def test_with_a_faster_node_clock_the_catch_up_still_lasts_its_wall_seconds() -> None:
+    """How the speed monitor node uses it under a simulation's /clock at 10x real time: the
+    process stalls for 2.1 s of wall time (21 s of node time) and the estimates sent meanwhile
+    reach it 2.5 s (wall) after it resumed. The catch-up, counted on the wall clock, spans 30 s
+    of node time: no sensor timeout. Granting the catch-up on the node clock (3 s of it, 0.3 s
+    of wall time) raised one."""
+    config = MonitorConfig(sensor_timeout_s=2.0, starvation_time_s=1000.0)  # no parts here
+
+    def run(catch_up_on_node_clock: bool) -> list[int]:
+        monitor = SpeedMonitor(config)
+        detector = StallDetector(0.1, catch_up_s=3.0)
+        monitor.on_drive(0.0, True, 0.02)
+        alarms = []
+        wall_ticks = [0.1 * k for k in range(11)] + [3.1 + 0.1 * k for k in range(60)]
+        for wall in wall_ticks:
+            node = 10.0 * wall
+            if wall <= 1.0 or wall >= 5.6:  # estimates: before the stall, and once caught up
+                monitor.on_estimate(node, 0.02, 1.0)
+            stalled = detector.stalled(wall)
+            if catch_up_on_node_clock:
+                if stalled:
+                    monitor.resumed(node, 3.0)
+            elif stalled or detector.catching_up(wall):
+                monitor.resumed(node)
+            alarms.append(monitor.evaluate(node).alarms)
+        return alarms
+
+    assert [a for a in run(False) if a] == []
+    raised = [a for a in run(True) if a]
+    assert raised
+    assert all(a == Alarm.SENSOR_TIMEOUT for a in raised)

@@ -33,7 +33,7 @@ from feeder_ros.msg import (
 from feeder_ros.node_interfaces import NodeInterface, TopicSpec
 from feeder_ros.nodes.ros_parameters import declare_parameters, validator
 from feeder_ros.nodes.runner import run_node
-from feeder_ros.nodes.stall_detector import MIDDLEWARE_CATCH_UP_S, StallDetector
+from feeder_ros.nodes.stall_detector import StallDetector
 from feeder_ros.physics.parameters import ParameterSpec
 
 _TIMES = (
@@ -210,7 +210,8 @@ class SpeedMonitorNode(Node):
         self.create_subscription(DriveCommand, "drive/command", self._on_command, RELIABLE)
         self.create_timer(1.0 / self._values["publish_rate_hz"], self._publish)
         # a tick late because this process stalled: the inputs sent meanwhile are still on their
-        # way; silence counts from here (not a false sensor timeout)
+        # way; silence counts from the end of the middleware's catch-up (not a false sensor
+        # timeout)
         self._stalls = StallDetector(1.0 / self._values["publish_rate_hz"])
 
     def _now(self) -> float:
@@ -259,11 +260,15 @@ class SpeedMonitorNode(Node):
             self._monitor.on_drive(self._now(), driving, self._values["target_speed_mps"])
 
     def _publish(self) -> None:
-        stalled = self._stalls.stalled(time.monotonic())
+        wall = time.monotonic()
+        stalled = self._stalls.stalled(wall)
+        listening = stalled or self._stalls.catching_up(wall)
         with self._lock:
             now = self._now()
-            if stalled:
-                self._monitor.resumed(now, MIDDLEWARE_CATCH_UP_S)
+            if listening:
+                # the catch-up runs on the wall clock, the monitor on the node clock (maybe a
+                # faster simulation's): it listens from every tick within the catch-up
+                self._monitor.resumed(now)
             status = self._monitor.evaluate(now)
         message = SpeedStatus()
         message.header.stamp = self.get_clock().now().to_msg()

@@ -8,9 +8,11 @@ speed monitor stopped for 2.6 s reported "sensor timeout" (ERROR) on resuming wh
 kept coming, and was at target again a second later.
 
 :class:`StallDetector` recognises such a stall by the timer tick that comes late; the node then
-counts silence from that moment. It never reports two ticks in a row: for a node starved for
-good, every other tick judges the inputs as they are. Plain Python (no rclpy): the nodes feed it
-a steady clock.
+counts silence from the end of the middleware's catch-up after it. It never reports two ticks in
+a row: for a node starved for good, every other tick judges the inputs as they are (once the
+catch-up is over). Plain Python (no rclpy): the nodes feed it a steady clock, the wall clock the
+middleware runs on, even when the node clock is a simulation's ``/clock`` running faster than
+real time (3 s of catch-up are then 30 s of a 10x simulation).
 """
 
 from __future__ import annotations
@@ -26,17 +28,24 @@ MIDDLEWARE_CATCH_UP_S = 3.0
 
 class StallDetector:
     """``stalled(now)`` is true for a tick more than ``period_s + slack_s`` after the last one
-    (the first tick is never late), unless the last tick was reported."""
+    (the first tick is never late), unless the last tick was reported; ``catching_up(now)`` is
+    true from a reported stall until ``catch_up_s`` after it (the node keeps listening then)."""
 
-    def __init__(self, period_s: float, slack_s: float = 0.5) -> None:
+    def __init__(
+        self, period_s: float, slack_s: float = 0.5, catch_up_s: float = MIDDLEWARE_CATCH_UP_S
+    ) -> None:
         if not (math.isfinite(period_s) and period_s > 0.0):
             raise ValueError(f"period_s={period_s!r} must be a positive number of seconds")
         if not (math.isfinite(slack_s) and slack_s >= 0.0):
             raise ValueError(f"slack_s={slack_s!r} must be a non-negative number of seconds")
+        if not (math.isfinite(catch_up_s) and catch_up_s >= 0.0):
+            raise ValueError(f"catch_up_s={catch_up_s!r} must be a non-negative number of seconds")
         self.period_s = period_s
         self.slack_s = slack_s
+        self.catch_up_s = catch_up_s
         self._last = math.nan
         self._reported = False
+        self._catch_up_end = -math.inf
         self.stalls = 0  #: stalls reported so far (for the node's diagnostics)
 
     def stalled(self, now_s: float) -> bool:
@@ -46,6 +55,12 @@ class StallDetector:
         if gap > self.period_s + self.slack_s and not self._reported:
             self._reported = True
             self.stalls += 1
+            self._catch_up_end = now_s + self.catch_up_s
             return True
         self._reported = False
         return False
+
+    def catching_up(self, now_s: float) -> bool:
+        """Whether ``now_s`` (the same steady clock) lies in the middleware's catch-up after the
+        last reported stall: silence does not count yet (from the stalled tick itself on)."""
+        return now_s < self._catch_up_end

@@ -22,7 +22,6 @@ from typing import Any
 
 import numpy as np
 from diagnostic_msgs.msg import DiagnosticArray, DiagnosticStatus, KeyValue
-from rclpy.duration import Duration
 from rclpy.exceptions import InvalidHandle
 from rclpy.node import Node
 from rclpy.parameter import Parameter
@@ -41,7 +40,7 @@ from feeder_ros.msg import AccelerometerBatch, CarrierState, DriveCommand, Vehic
 from feeder_ros.node_interfaces import NodeInterface, TopicSpec
 from feeder_ros.nodes.ros_parameters import declare_parameters, validator
 from feeder_ros.nodes.runner import run_node
-from feeder_ros.nodes.stall_detector import MIDDLEWARE_CATCH_UP_S, StallDetector
+from feeder_ros.nodes.stall_detector import StallDetector
 from feeder_ros.physics.parameters import (
     PARAMETER_SPECS,
     FeederParameters,
@@ -280,8 +279,8 @@ class VehicleEstimatorNode(Node):
         self._batches: list[tuple[np.ndarray, np.ndarray]] = []
         self._received = 0
         self._last_input = self.get_clock().now()
-        # after this process's own stall (a late diagnostics tick), silence counts from the
-        # resume plus the middleware's catch-up: the samples sent meanwhile are on their way
+        # after this process's own stall (a late diagnostics tick), silence counts from the end
+        # of the middleware's catch-up: the samples sent meanwhile are on their way
         self._stalls = StallDetector(DIAGNOSTICS_PERIOD_S)
         self._listening_since = self._last_input
         self._record: EstimateRecord = self._estimator.last_estimate
@@ -461,8 +460,11 @@ class VehicleEstimatorNode(Node):
         with self._lock:
             record = self._record
             now = self.get_clock().now()
-            if self._stalls.stalled(time.monotonic()):
-                self._listening_since = now + Duration(seconds=MIDDLEWARE_CATCH_UP_S)
+            wall = time.monotonic()
+            if self._stalls.stalled(wall) or self._stalls.catching_up(wall):
+                # the catch-up runs on the wall clock, silence on the node clock (maybe a
+                # faster simulation's): listening from every tick within the catch-up
+                self._listening_since = now
             since = max(self._last_input, self._listening_since)
             silent_s = (now - since).nanoseconds * 1e-9
             waited_s = (now - self._last_input).nanoseconds * 1e-9  # since start, if none came
