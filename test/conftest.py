@@ -3,6 +3,11 @@
 DDS isolation: before anything can initialise rclpy, the session claims a ROS domain id that no
 other test session on this machine holds (a lock file per id) and limits discovery to localhost.
 Every process the tests start inherits both, so parallel runs never see each other's nodes.
+
+Ctrl-C: a session started as a background job of a non-interactive shell (``make test &`` in a
+script, a CI runner's job) has SIGINT ignored, and every process it starts inherits that: the
+tests that stop a node, ``feeder cell`` or a sweep with Ctrl-C (SIGINT) would see it ignored. The
+session handles SIGINT again, so that its children start with the default disposition.
 """
 
 from __future__ import annotations
@@ -11,6 +16,7 @@ import atexit
 import fcntl
 import os
 import random
+import signal
 import sys
 from pathlib import Path
 from typing import IO
@@ -54,6 +60,8 @@ os.environ["ROS_AUTOMATIC_DISCOVERY_RANGE"] = "LOCALHOST"
 os.environ.pop("ROS_STATIC_PEERS", None)
 os.environ.pop("ROS_LOCALHOST_ONLY", None)
 os.environ.setdefault("MPLBACKEND", "Agg")
+if signal.getsignal(signal.SIGINT) is signal.SIG_IGN:
+    signal.signal(signal.SIGINT, signal.default_int_handler)  # exec resets it to SIG_DFL
 
 
 def pytest_report_header() -> str:
