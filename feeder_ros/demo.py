@@ -338,7 +338,9 @@ def main(argv: list[str] | None = None) -> int:
     finally:
         with recording.lock:
             recording.collecting_diagnostics = False
-        cell.send_signal(signal.SIGINT)
+        # SIGTERM, which `feeder cell` takes like Ctrl-C: a demo run as a background job of a
+        # non-interactive shell starts the cell with SIGINT ignored
+        cell.send_signal(signal.SIGTERM)
         cell_code = cell.wait(timeout=30)
         executor.shutdown()
         thread.join(timeout=5)

@@ -140,7 +140,7 @@ def _alive(pid: int) -> bool:
     return stat.exists() and stat.read_text().split()[2] != "Z"
 
 
-@pytest.mark.parametrize("how", ["ctrl-c", "sigkill"])
+@pytest.mark.parametrize("how", ["ctrl-c", "sigterm", "sigkill"])
 def test_cell_runs_feeders_side_by_side_and_leaves_no_orphans(tmp_path: Path, how: str) -> None:
     cell_file = _two_feeders(tmp_path)
     process = subprocess.Popen(
@@ -169,8 +169,8 @@ def test_cell_runs_feeders_side_by_side_and_leaves_no_orphans(tmp_path: Path, ho
             assert wait_until(topics_up, 15.0), node.get_topic_names_and_types()
         children = _children(process.pid)
         assert len(children) == 4
-        if how == "ctrl-c":
-            process.send_signal(signal.SIGINT)
+        if how in ("ctrl-c", "sigterm"):  # SIGTERM: as a service manager (or the demo) stops it
+            process.send_signal(signal.SIGINT if how == "ctrl-c" else signal.SIGTERM)
             output, _ = process.communicate(timeout=30)
             assert process.returncode == 0, output
             assert "[cell] stopping" in output
