@@ -153,16 +153,14 @@ class SpeedMonitor:
             self.time_jumps = jumps
         self._last_t = t
 
-    def resumed(self, t: float, catch_up_s: float = 0.0) -> None:
-        """The monitor was not listening until ``t`` (its process stalled: inputs sent meanwhile
-        are still on their way, and the middleware may take ``catch_up_s`` more to deliver
-        them). Time without an input (an estimate, a confident speed, a part, a sensor
-        uncovered) counts from ``t + catch_up_s`` at the earliest: a stall is not the inputs'
-        silence."""
-        if not (math.isfinite(catch_up_s) and catch_up_s >= 0.0):
-            raise ParameterError(f"catch_up_s={catch_up_s!r} must be a non-negative number")
+    def resumed(self, t: float) -> None:
+        """The monitor was not listening until ``t`` (its process stalled, and the inputs sent
+        meanwhile are still on their way). Time without an input (an estimate, a confident
+        speed, a part, a sensor uncovered) counts from ``t`` at the earliest: a stall is not the
+        inputs' silence. The node calls it at every tick of the middleware's catch-up, which
+        runs on the wall clock (see :class:`~feeder_ros.nodes.stall_detector.StallDetector`)."""
         self._advance(t)
-        self._listen_t = t + catch_up_s
+        self._listen_t = t
 
     def on_drive(self, t: float, driving: bool, target_speed_mps: float) -> None:
         """The drive state: whether it drives, and the target part speed (nan: none)."""

@@ -260,12 +260,10 @@ class SpeedMonitorNode(Node):
             self._monitor.on_drive(self._now(), driving, self._values["target_speed_mps"])
 
     def _publish(self) -> None:
-        wall = time.monotonic()
-        stalled = self._stalls.stalled(wall)
-        listening = stalled or self._stalls.catching_up(wall)
+        resuming = self._stalls.resuming(time.monotonic())
         with self._lock:
             now = self._now()
-            if listening:
+            if resuming:
                 # the catch-up runs on the wall clock, the monitor on the node clock (maybe a
                 # faster simulation's): it listens from every tick within the catch-up
                 self._monitor.resumed(now)

@@ -28,8 +28,9 @@ MIDDLEWARE_CATCH_UP_S = 3.0
 
 class StallDetector:
     """``stalled(now)`` is true for a tick more than ``period_s + slack_s`` after the last one
-    (the first tick is never late), unless the last tick was reported; ``catching_up(now)`` is
-    true from a reported stall until ``catch_up_s`` after it (the node keeps listening then)."""
+    (the first tick is never late), unless the last tick was reported. A node calls
+    :meth:`resuming` at every tick instead: true from a reported stall until ``catch_up_s`` after
+    it, while silence must not count."""
 
     def __init__(
         self, period_s: float, slack_s: float = 0.5, catch_up_s: float = MIDDLEWARE_CATCH_UP_S
@@ -60,7 +61,9 @@ class StallDetector:
         self._reported = False
         return False
 
-    def catching_up(self, now_s: float) -> bool:
-        """Whether ``now_s`` (the same steady clock) lies in the middleware's catch-up after the
-        last reported stall: silence does not count yet (from the stalled tick itself on)."""
-        return now_s < self._catch_up_end
+    def resuming(self, now_s: float) -> bool:
+        """The tick at ``now_s`` (:meth:`stalled`'s clock): whether it lies in a stall's
+        catch-up, from the stalled tick on, when the node listens again and silence does not
+        count yet."""
+        stalled = self.stalled(now_s)
+        return stalled or now_s < self._catch_up_end

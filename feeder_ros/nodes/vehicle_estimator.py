@@ -460,8 +460,7 @@ class VehicleEstimatorNode(Node):
         with self._lock:
             record = self._record
             now = self.get_clock().now()
-            wall = time.monotonic()
-            if self._stalls.stalled(wall) or self._stalls.catching_up(wall):
+            if self._stalls.resuming(time.monotonic()):
                 # the catch-up runs on the wall clock, silence on the node clock (maybe a
                 # faster simulation's): listening from every tick within the catch-up
                 self._listening_since = now
