@@ -15,6 +15,15 @@ from pathlib import Path
 from typing import Any
 
 import rclpy
+from lifecycle_msgs.srv import GetState
+from rcl_interfaces.srv import (
+    DescribeParameters,
+    GetParameters,
+    GetParameterTypes,
+    ListParameters,
+    SetParameters,
+    SetParametersAtomically,
+)
 from rclpy.context import Context
 from rclpy.executors import SingleThreadedExecutor
 from rclpy.node import Node
@@ -112,21 +121,57 @@ def probe_node(name: str = "feeder_test_probe") -> Iterator[Node]:
 _clients: weakref.WeakKeyDictionary[Node, dict[tuple[Any, str], Any]] = weakref.WeakKeyDictionary()
 
 
-def call(node: Node, service_type: Any, name: str, request: Any, timeout_s: float = 30.0) -> Any:
-    """Call a service from the test thread (the probe's executor thread delivers the answer)."""
+#: services whose request can be sent again with the same outcome: reads, and parameter sets
+#: (the same values set twice leave the node as once). :func:`call` repeats them when no answer
+#: comes within its attempt window.
+REPEATABLE_SERVICES: tuple[Any, ...] = (
+    DescribeParameters,
+    GetParameters,
+    GetParameterTypes,
+    ListParameters,
+    SetParameters,
+    SetParametersAtomically,
+    GetState,
+)
+
+
+def call(
+    node: Node,
+    service_type: Any,
+    name: str,
+    request: Any,
+    timeout_s: float = 30.0,
+    attempt_s: float = 5.0,
+) -> Any:
+    """Call a service from the test thread (the probe's executor thread delivers the answer).
+
+    A reply can be lost in DDS discovery: ``wait_for_service`` sees the server, but the server may
+    not yet have matched the client's fresh reply reader when the request arrives; Fast DDS then
+    drops the reply ("failed to send response (timeout)" in the server's log). So a request of
+    :data:`REPEATABLE_SERVICES` is sent again when ``attempt_s`` pass without an answer (until
+    ``timeout_s``). Other requests are sent once: sent twice, they could act twice. (Waiting
+    after a new client is seen would not be safe either: tests time what a call sets off from
+    just before it.)"""
     clients = _clients.setdefault(node, {})
     client = clients.get((service_type, name))
     if client is None:
         client = clients[(service_type, name)] = node.create_client(service_type, name)
     assert client.wait_for_service(timeout_sec=timeout_s), f"{name} not available"
-    future = client.call_async(request)
+    repeatable = service_type in REPEATABLE_SERVICES
     deadline = time.monotonic() + timeout_s
-    while not future.done() and time.monotonic() < deadline:
-        time.sleep(0.01)
-    if not future.done():
+    while True:
+        future = client.call_async(request)
+        attempt_end = min(deadline, time.monotonic() + attempt_s) if repeatable else deadline
+        while not future.done() and time.monotonic() < attempt_end:
+            time.sleep(0.01)
+        if future.done():
+            return future.result()
         client.remove_pending_request(future)
-        raise AssertionError(f"{name} did not answer within {timeout_s} s")
-    return future.result()
+        if time.monotonic() >= deadline:
+            raise AssertionError(
+                f"{name} did not answer within {timeout_s} s (an answer lost in DDS discovery shows"
+                " as 'failed to send response' in the server's output)"
+            )
 
 
 class DrainedProcess(subprocess.Popen[str]):
