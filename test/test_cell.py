@@ -244,6 +244,16 @@ def test_cell_refuses_a_bad_description_before_starting_anything(tmp_path: Path)
     assert "nodes.x: unknown node" in result.stderr
 
 
+@pytest.mark.parametrize("duration", ["inf", "nan", "0", "-3"])
+def test_a_duration_that_never_ends_or_never_starts_is_refused(
+    duration: str, capsys: pytest.CaptureFixture[str]
+) -> None:
+    with pytest.raises(SystemExit) as exit_info:
+        main(["cell", "--duration", duration, "--list"])
+    assert exit_info.value.code == 2
+    assert f"argument --duration: {duration!r}" in capsys.readouterr().err
+
+
 def test_list_prints_command_lines_that_run_on_the_written_parameters(
     tmp_path: Path, capsys: pytest.CaptureFixture[str]
 ) -> None:

@@ -144,6 +144,10 @@ def test_bad_data_is_refused_with_the_reason(
     csv.write_text("\n".join(lines) + "\n")
     err = _fails(["--source", "csv", str(csv)], capsys)
     assert "line 3: speed_mps=nan in a usable row (ok=1)" in err
+    # a field no CSV writer makes (the csv module's limit): the file is named, not a traceback
+    csv.write_text(lines[0] + "\n" + '"' + "9" * 200_000 + '"\n')
+    err = _fails(["--source", "csv", str(csv)], capsys)
+    assert f"{csv}: cannot read: field larger than field limit" in err
     # parts running backwards only: nothing to fit (left out as the paper left them out)
     err = _fails(["--frequencies", "17:18:0.5", *SMALL], capsys)
     assert "no usable points" in err
@@ -194,6 +198,12 @@ def test_bad_plan_file_names_the_entry(tmp_path: Path, capsys: pytest.CaptureFix
     plan.write_text("sweep: {frequencies_hz: 20, amplitudes_percent: 40, part_masses_kg: 0.03}\n"
                     "fit: {orders: '1/2', weights: 1}\n")  # fmt: skip
     assert "fit.weights: unknown" in _fails(["--plan", str(plan)], capsys)
+    sweep = "sweep: {frequencies_hz: 20, amplitudes_percent: 40, part_masses_kg: 0.03}\n"
+    for bad in (".nan", "-0.01", ".inf"):
+        plan.write_text(sweep + f"fit: {{min_speed_mps: {bad}}}\n")
+        err = _fails(["--plan", str(plan)], capsys)
+        assert f"{plan}: fit.min_speed_mps=" in err
+        assert "must be >= 0 and finite" in err
 
 
 def test_bag_source(tmp_path: Path, capsys: pytest.CaptureFixture[str]) -> None:

@@ -32,6 +32,7 @@ from rosbags.rosbag2 import Reader as RosbagsReader
 from stuck_code import TEARDOWN_TIMEOUT_TEXT, stuck_teardown_script
 
 from feeder_ros.bag import Bag, BagWarning, bag_info
+from feeder_ros.cli.main import main
 from feeder_ros.msg import CarrierState, DriveCommand, PartStateArray
 
 BIN = Path(sys.executable).parent
@@ -394,3 +395,22 @@ def test_a_recorder_whose_teardown_hangs_ends_with_its_bag_complete(tmp_path: Pa
     assert meta["rosbag2_bagfile_information"]["message_count"] == info.message_count
     with RosbagsReader(bag) as reader:
         assert reader.message_count == info.message_count
+
+
+@pytest.mark.parametrize(
+    ("option", "value", "needle"),
+    [
+        ("--chunk-size", "1e300G", "'1e300G' is too large (at most 1024G)"),
+        ("--max-bag-size", "2048G", "'2048G' is too large (at most 1024G)"),
+        ("--chunk-size", "0.5", "'0.5' is less than one byte"),
+        ("--chunk-size", "nan", "'nan' must be >= 0"),
+    ],
+)
+def test_record_sizes_are_checked_by_the_parser(
+    tmp_path: Path, option: str, value: str, needle: str, capsys: pytest.CaptureFixture[str]
+) -> None:
+    with pytest.raises(SystemExit) as exit_info:
+        main(["record", "-o", str(tmp_path / "bag"), option, value, "--duration", "1"])
+    assert exit_info.value.code == 2
+    assert needle in capsys.readouterr().err
+    assert not (tmp_path / "bag").exists()

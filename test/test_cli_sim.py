@@ -3,10 +3,13 @@
 from __future__ import annotations
 
 import csv
+import subprocess
+import sys
 from pathlib import Path
 
 import numpy as np
 import pytest
+from matplotlib.figure import Figure
 
 from feeder_ros.cli.main import main
 from feeder_ros.cli.sim import default_config_path, load_parameters
@@ -143,6 +146,47 @@ def test_bad_config_files_are_refused(tmp_path: Path, capsys: pytest.CaptureFixt
     assert load_parameters(good, ["damping_ns_per_m=30"]) == FeederParameters(
         drive_amplitude_n=40.0, damping_ns_per_m=30.0
     )
+
+
+def test_a_run_the_solver_cannot_continue_fails_without_a_traceback(
+    tmp_path: Path, capsys: pytest.CaptureFixture[str]
+) -> None:
+    # driven exactly at the undamped forward branch's natural frequency: no closed form
+    resonant = FeederParameters().forward_natural_frequency_hz
+    out = tmp_path / "never.csv"
+    args = ["sim", "--set", f"drive_frequency_hz={resonant!r}", "--duration", "0.1"]
+    assert main([*args, "--output", str(out)]) == 1
+    err = capsys.readouterr().err
+    assert err.startswith("feeder sim: simulation failed: sharp solver stopped at t=0.0 s: ")
+    assert "exact resonance of an undamped branch" in err
+    assert not out.exists()
+
+
+def test_run_as_a_module_its_errors_are_still_messages(tmp_path: Path) -> None:
+    missing = tmp_path / "missing.yaml"
+    done = subprocess.run(
+        [sys.executable, "-m", "feeder_ros.cli.main", "sim", "--config", str(missing)],
+        capture_output=True,
+        text=True,
+        timeout=120,
+        check=False,
+    )
+    assert done.returncode == 2, done.stderr
+    assert done.stderr == f"feeder sim: error: --config {missing}: no such file\n"
+
+
+def test_a_failed_figure_leaves_no_partial_png(
+    tmp_path: Path, monkeypatch: pytest.MonkeyPatch, capsys: pytest.CaptureFixture[str]
+) -> None:
+    def half_written(figure: Figure, path: Path, **kwargs: object) -> None:
+        Path(path).write_bytes(b"\x89PNG half")
+        raise OSError("disk full")
+
+    monkeypatch.setattr(Figure, "savefig", half_written)
+    figures = tmp_path / "figs"
+    assert main(["sim", "--duration", "0.1", "--plot", str(figures)]) == 2
+    assert capsys.readouterr().err == "feeder sim: error: disk full\n"
+    assert list(figures.iterdir()) == []
 
 
 def test_bad_options_are_refused(capsys: pytest.CaptureFixture[str]) -> None:

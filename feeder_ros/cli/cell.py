@@ -25,6 +25,7 @@ from typing import Any
 
 from feeder_ros.atomic_files import atomic_text
 from feeder_ros.cell import CellDescription, CellError, NodeLaunch, load_cell, parameters_document
+from feeder_ros.cli.arguments import positive_float
 from feeder_ros.cli.main import CommandError
 from feeder_ros.cli.outputs import check_output_file
 
@@ -72,7 +73,9 @@ def add_arguments(parser: argparse.ArgumentParser) -> None:
     parser.add_argument("--config", type=Path, help=f"cell description (default: {CELL_FILE})")
     parser.add_argument("--composed", action="store_true", help="run all nodes in this one process")
     parser.add_argument(
-        "--duration", type=float, help="stop after this many seconds (default: until Ctrl-C)"
+        "--duration",
+        type=positive_float,
+        help="stop after this many seconds (default: until Ctrl-C)",
     )
     parser.add_argument(
         "--list",

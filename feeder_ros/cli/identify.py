@@ -22,6 +22,7 @@ the speed model file the drive interface loads for its target-speed mode.
 from __future__ import annotations
 
 import argparse
+import math
 import sys
 import time
 from pathlib import Path
@@ -203,6 +204,8 @@ def load_plan(args: argparse.Namespace) -> tuple[SweepPlan, FitSettings]:
     folds = fit_section.get("folds", DEFAULT_FOLDS)
     if isinstance(min_speed, bool) or not isinstance(min_speed, int | float):
         raise CommandError(f"{path}: fit.min_speed_mps={min_speed!r} is not a number")
+    if not (math.isfinite(min_speed) and min_speed >= 0.0):
+        raise CommandError(f"{path}: fit.min_speed_mps={min_speed!r} must be >= 0 and finite")
     if isinstance(folds, bool) or not isinstance(folds, int) or folds < 2:
         raise CommandError(f"{path}: fit.folds={folds!r} must be an integer >= 2")
 

@@ -20,6 +20,8 @@ import sys
 from collections.abc import Sequence
 from typing import Protocol, cast
 
+from feeder_ros.physics.errors import SimulationError
+
 __all__ = ["SUBCOMMANDS", "CommandError", "main"]
 
 # name -> module (imported lazily so that ``feeder --help`` stays fast)
@@ -83,7 +85,15 @@ def main(argv: Sequence[str] | None = None) -> int:
     except (CommandError, ValueError, OSError) as error:
         print(f"feeder {args.command}: error: {error}", file=sys.stderr)
         return 2
+    except SimulationError as error:  # the run itself failed (the parameters were valid)
+        print(f"feeder {args.command}: simulation failed: {error}", file=sys.stderr)
+        return 1
 
 
 if __name__ == "__main__":
-    sys.exit(main())
+    # run as ``python -m feeder_ros.cli.main``: this file is then ``__main__``, a second copy of
+    # the module whose CommandError is not the one the sub-commands raise; the package's own
+    # module catches it
+    from feeder_ros.cli.main import main as package_main
+
+    sys.exit(package_main())

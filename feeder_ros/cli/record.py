@@ -19,6 +19,7 @@ __all__ = ["HELP", "add_arguments", "run"]
 
 HELP = "record feeder topics from the ROS graph into a rosbag2 (MCAP) bag"
 _UNITS = {"": 1, "k": 1 << 10, "K": 1 << 10, "M": 1 << 20, "G": 1 << 30}
+_SIZE_MAX = 1 << 40  # bytes: a chunk or bag file this large is a typo
 
 
 def _size(text: str) -> int:
@@ -30,7 +31,12 @@ def _size(text: str) -> int:
         raise argparse.ArgumentTypeError(f"{text!r} is not a size (e.g. 4096, 64K, 512M)") from None
     if not (value >= 0 and math.isfinite(value)):
         raise argparse.ArgumentTypeError(f"{text!r} must be >= 0")
-    return int(value * _UNITS[unit])
+    size = value * _UNITS[unit]
+    if size > _SIZE_MAX:
+        raise argparse.ArgumentTypeError(f"{text!r} is too large (at most 1024G)")
+    if 0 < size < 1:
+        raise argparse.ArgumentTypeError(f"{text!r} is less than one byte")
+    return int(size)
 
 
 def _seconds(text: str) -> float:
@@ -100,7 +106,7 @@ def run(args: argparse.Namespace) -> int:
     from feeder_ros.recording import RecordingOptions, record
 
     if args.chunk_size <= 0:
-        raise CommandError("--chunk-size must be > 0")
+        raise CommandError(f"--chunk-size={args.chunk_size} must be > 0 bytes")
     output = args.output or Path(time.strftime("feeder_%Y%m%d-%H%M%S"))
     options = RecordingOptions(
         output=output,

@@ -428,7 +428,7 @@ class SweepResult:
         try:
             with path.open(newline="", encoding="utf-8") as stream:
                 rows = list(csv.reader(stream))
-        except (OSError, UnicodeDecodeError) as error:
+        except (OSError, UnicodeDecodeError, csv.Error) as error:
             raise SweepDataError(f"{path}: cannot read: {error}") from None
         if not rows:
             raise SweepDataError(f"{path}: empty file (expected a header {','.join(CSV_COLUMNS)})")

@@ -18,9 +18,9 @@ from pathlib import Path
 
 import numpy as np
 import numpy.typing as npt
-from matplotlib.backends.backend_agg import FigureCanvasAgg
 from matplotlib.figure import Figure
 
+from feeder_ros.figures import save_figure
 from feeder_ros.physics.parameters import FeederParameters
 from feeder_ros.physics.simulation import EventKind, PartSpec, SimulationResult, simulate
 
@@ -87,9 +87,7 @@ def case_study_facts(
 
 
 def _save(figure: Figure, path: Path) -> Path:
-    FigureCanvasAgg(figure)
-    figure.savefig(path, dpi=110)
-    return path
+    return save_figure(figure, path)
 
 
 def detail_run(

@@ -59,6 +59,7 @@ import numpy.typing as npt
 
 from feeder_ros.physics import sharp_solver as _k
 from feeder_ros.physics.drive import DriveChange, DriveSchedule
+from feeder_ros.physics.errors import SimulationError
 from feeder_ros.physics.parameters import FeederParameters, ParameterError
 from feeder_ros.physics.parameters import finite_number as _finite
 
@@ -108,10 +109,6 @@ class EventKind(enum.IntEnum):
     PART_EXIT = _k.EV_EXIT  #: a part passes the track end
     SLIDING_START = _k.EV_SLIDE_START  #: velocity switching: carrier held at x' = 0 (Filippov)
     SLIDING_END = _k.EV_SLIDE_END  #: velocity switching: carrier released
-
-
-class SimulationError(RuntimeError):
-    """The solver could not continue; the message says why and where."""
 
 
 @dataclass(frozen=True)
