@@ -169,6 +169,9 @@ def test_bad_data_is_refused_with_the_reason(
         (["--source", "sim", "x.csv"], "--source sim takes no input files"),
         (["--source", "sim", "--measure", "truth"], "--measure is for --source live (not sim)"),
         (["--source", "csv", "x.csv", "--namespace", "/a"], "--namespace is for --source live"),
+        (["--source", "csv", "x.csv", "--set", "damping_ns_per_m=3"], "--set is for --source sim"),
+        (["--source", "bag", "b", "--config", "c.yaml"], "--config is for --source sim"),
+        (["--source", "live", "--preset", "none"], "--preset is for --source sim"),
     ],
 )
 def test_bad_options_are_refused(

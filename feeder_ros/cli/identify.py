@@ -60,6 +60,7 @@ PLAN_NAME = "identify.yaml"
 SOURCES = ("sim", "live", "bag", "csv")
 MEASURES = ("sensors", "monitor", "truth")
 DEFAULT_ORDERS = "0/2, 1/2, 1/3, 1/4, 2/4"
+SIM_PRESET = "realistic"  #: --source sim: the simulator YAML section of the plant by default
 
 
 def default_plan_path() -> Path:
@@ -128,7 +129,7 @@ def add_arguments(parser: argparse.ArgumentParser) -> None:
     )
     fit.add_argument("--no-fit", action="store_true", help="measure (and write) the sweep only")
     sim = parser.add_argument_group("--source sim: the plant")
-    add_plant_arguments(sim, "realistic")
+    add_plant_arguments(sim, SIM_PRESET)
     live = parser.add_argument_group("--source live: the cell")
     live.add_argument("--namespace", default="", help="the feeder's namespace, e.g. /cell/feeder_1")
     live.add_argument(
@@ -372,6 +373,16 @@ def run(args: argparse.Namespace) -> int:
         ):
             if given:
                 raise CommandError(f"{flag} is for --source live (not {args.source})")
+    if args.source != "sim":
+        for flag, given in (
+            ("--config", args.config is not None),
+            ("--preset", args.preset != SIM_PRESET),
+            ("--set", bool(args.overrides)),
+        ):
+            if given:
+                raise CommandError(
+                    f"{flag} is for --source sim (the simulated plant), not {args.source}"
+                )
     plan: SweepPlan | None = None
     plan, settings = load_plan(args)
     show = bool(args.progress) or sys.stderr.isatty()
