@@ -86,10 +86,6 @@ def case_study_facts(
     return case_study_facts_from_result(params, result)
 
 
-def _save(figure: Figure, path: Path) -> Path:
-    return save_figure(figure, path)
-
-
 def detail_run(
     params: FeederParameters, parts: Sequence[PartSpec] = (PartSpec(),), duration_s: float = 0.04
 ) -> SimulationResult:
@@ -118,13 +114,13 @@ def plot_result(
     ax = fig.add_subplot()
     ax.plot(t, result.carrier_x_m * 1e6, lw=0.5)
     ax.set(xlabel="t [s]", ylabel="carrier displacement v [µm]", title=f"Carrier ({label})")
-    paths.append(_save(fig, out_dir / f"{prefix}carrier_displacement.png"))
+    paths.append(save_figure(fig, out_dir / f"{prefix}carrier_displacement.png"))
 
     fig = Figure(figsize=(5, 5), layout="constrained")
     ax = fig.add_subplot()
     ax.plot(result.carrier_x_m * 1e6, result.carrier_v_mps * 1e3, lw=0.3)
     ax.set(xlabel="v [µm]", ylabel="dv/dt [mm/s]", title=f"Phase portrait ({label})")
-    paths.append(_save(fig, out_dir / f"{prefix}phase_portrait.png"))
+    paths.append(save_figure(fig, out_dir / f"{prefix}phase_portrait.png"))
 
     if detail is not None:
         result, t = detail, detail.t_s
@@ -149,7 +145,7 @@ def plot_result(
     ax_x.legend(loc="upper right", fontsize="small")
     ax_p.set(xlabel="t [ms]", ylabel="part 0 phase", yticks=list(PHASE_NAMES))
     ax_p.set_yticklabels(list(PHASE_NAMES.values()))
-    paths.append(_save(fig, out_dir / f"{prefix}first_40ms.png"))
+    paths.append(save_figure(fig, out_dir / f"{prefix}first_40ms.png"))
     return paths
 
 
