@@ -112,8 +112,18 @@ class DriveController:
         self.set_point = DrivePoint(clamped.frequency_hz, clamped.amplitude_percent)
         if self.running:
             self.ramp.retarget(now_s, self.set_point, self.set_ramp_time_s)
-        elif self.ramp.value(now_s).amplitude_percent > 0.0:
-            self.ramp.to_zero(now_s)
+        else:
+            # not running: the output heads for zero force at a frequency inside the new limits
+            # (an idle output left at a frequency the limits now exclude would fail the guard
+            # and latch a fault on a drive that does nothing)
+            value = self.ramp.value(now_s)
+            inside = clamp_set_point(limits, value.frequency_hz, 0.0, 0.0).frequency_hz
+            target = self.ramp.target
+            if value.amplitude_percent > 0.0 or (target.frequency_hz, target.amplitude_percent) != (
+                inside,
+                0.0,
+            ):
+                self.ramp.retarget(now_s, DrivePoint(inside, 0.0))
         return clamped.reason
 
     def set_backend_fault(self, now_s: float, reason: str) -> None:
@@ -303,7 +313,14 @@ class DriveController:
         value = self.ramp.value(now_s)
         done = self.ramp.done(now_s)
         if not self._guard(value):
-            self.fault(now_s, f"output out of limits: {value}", immediate=True)
+            target = self.ramp.target
+            self.fault(
+                now_s,
+                f"output out of limits: {value.frequency_hz:g} Hz, "
+                f"{value.amplitude_percent:g} % heading for {target.frequency_hz:g} Hz, "
+                f"{target.amplitude_percent:g} %",
+                immediate=True,
+            )
             value = self.ramp.value(now_s)
         if self._latched is not None:
             self._state = self._latched

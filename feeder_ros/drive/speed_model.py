@@ -12,6 +12,7 @@ import hashlib
 import json
 import math
 import os
+from collections.abc import Callable
 from dataclasses import dataclass
 from pathlib import Path
 from typing import Protocol
@@ -192,10 +193,14 @@ def cached_speed_table(
     frequency_steps: int = 30,
     amplitude_steps: int = 11,
     duration_s: float = 2.0,
+    on_store_error: Callable[[OSError], None] | None = None,
 ) -> tuple[TableSpeedModel, Path, bool]:
     """The table from ``cache_dir`` if present for these inputs, else computed and stored.
 
     Returns (model, cache file, whether it was loaded). An unreadable cache file is recomputed.
+    A computed table that cannot be stored (the directory not writable, the disk full) raises
+    the ``OSError``, or, with ``on_store_error``, is passed to it and returned all the same (the
+    computation is not thrown away for its cache).
     """
     key = table_key(plant, limits, frequency_steps, amplitude_steps, duration_s)
     path = Path(cache_dir) / f"speed_table_{key}.npz"
@@ -209,12 +214,17 @@ def cached_speed_table(
         except (OSError, KeyError, ValueError):
             pass  # damaged: recompute below
     model = compute_speed_table(plant, limits, frequency_steps, amplitude_steps, duration_s)
-    path.parent.mkdir(parents=True, exist_ok=True)
-    with atomic_path(path, ".npz") as temporary:  # concurrent nodes never read half a file
-        np.savez(
-            temporary,
-            frequencies_hz=model.frequencies_hz,
-            amplitudes_percent=model.amplitudes_percent,
-            speeds_mps=model.speeds_mps,
-        )
+    try:
+        path.parent.mkdir(parents=True, exist_ok=True)
+        with atomic_path(path, ".npz") as temporary:  # concurrent nodes never read half a file
+            np.savez(
+                temporary,
+                frequencies_hz=model.frequencies_hz,
+                amplitudes_percent=model.amplitudes_percent,
+                speeds_mps=model.speeds_mps,
+            )
+    except OSError as error:
+        if on_store_error is None:
+            raise
+        on_store_error(error)
     return model, path, False

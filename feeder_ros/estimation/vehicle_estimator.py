@@ -2,13 +2,14 @@
 
 Pipeline (ROS-free, no clock; :meth:`VehicleEstimator.push` takes batches of accelerometer samples):
 
-1. **Input checks.** Non-finite samples are dropped (``INVALID_SAMPLES``, counted over the window,
-   whatever the batching of the input); samples not after the last accepted stamp are dropped
-   (``OUT_OF_ORDER``); a jump back by more than ``clock_reset_s`` (a replayed bag, a restarted
-   clock) resets the estimator. An interval longer than ``gap_factor`` times the nominal sample
-   period is a gap (``GAP``): up to ``max_bridge_s`` it is bridged by the periodic carrier model
-   (the part is propagated through it, but the bridged time never enters the window statistics); a
-   longer gap restarts the part observer and the statistics.
+1. **Input checks.** Non-finite samples, and samples beyond ``MAX_ABS_SAMPLE`` (1e6 m/s^2 or m: no
+   sensor reads that; the fit's arithmetic would overflow), are dropped (``INVALID_SAMPLES``,
+   counted over the window, whatever the batching of the input); samples not after the last accepted
+   stamp are dropped (``OUT_OF_ORDER``); a jump back by more than ``clock_reset_s`` (a replayed bag,
+   a restarted clock) resets the estimator. An interval longer than ``gap_factor`` times the nominal
+   sample period is a gap (``GAP``): up to ``max_bridge_s`` it is bridged by the periodic carrier
+   model (the part is propagated through it, but the bridged time never enters the window
+   statistics); a longer gap restarts the part observer and the statistics.
 2. **Carrier model** (:mod:`~feeder_ros.estimation.carrier_velocity`): a harmonic fit of the last
    ``fit_window_s`` of acceleration at the response period ``n/f_d`` (``n`` by BIC), refitted every
    ``refit_interval_s``, harmonics below ``coefficient_threshold_sigma`` dropped; velocity by
@@ -77,6 +78,9 @@ I8 = npt.NDArray[np.int8]
 B = npt.NDArray[np.bool_]
 
 _HIST_SUMS = ("x_all", "x_valid", "slip_valid", "time_valid")
+#: a sample's largest magnitude (m/s^2, or m for displacement input): beyond it the sample is
+#: invalid, as a non-finite one is (no accelerometer reads 100,000 g; the fit would overflow)
+MAX_ABS_SAMPLE = 1e6
 
 
 class Status(enum.IntEnum):
@@ -321,7 +325,7 @@ class VehicleEstimator:
         self._observer_start = math.nan
         self._events: dict[Status, float] = {}
         self._event_notes: dict[Status, str] = {}
-        # (stamp, count) of the non-finite samples dropped per processed batch: reported summed
+        # (stamp, count) of the invalid samples dropped per processed batch: reported summed
         # over the window, so the report does not depend on how the input was batched
         self._invalid: collections.deque[tuple[float, int]] = collections.deque()
         self._freq: float | None = self._command[0] if self._command is not None else None
@@ -426,7 +430,7 @@ class VehicleEstimator:
         self._trace = _empty_trace()
         if t.size == 0:
             return self._record
-        finite = np.isfinite(t) & np.isfinite(a)
+        finite = np.isfinite(t) & (np.abs(a) <= MAX_ABS_SAMPLE)  # False for nan too
         if not np.all(finite):
             bad = int(np.count_nonzero(~finite))
             stamps = t[np.isfinite(t)]
@@ -882,7 +886,7 @@ class VehicleEstimator:
                 out[status] = self._event_notes[status]
         if Status.INVALID_SAMPLES in out:
             dropped = sum(n for _, n in self._invalid)
-            out[Status.INVALID_SAMPLES] = f"{dropped} non-finite samples dropped"
+            out[Status.INVALID_SAMPLES] = f"{dropped} non-finite or out-of-range samples dropped"
         when = self._events.get(Status.DRIVE_CHANGED)
         if when is not None and when >= w_start:
             out[Status.DRIVE_CHANGED] = self._event_notes[Status.DRIVE_CHANGED]

@@ -163,15 +163,16 @@ class SpeedMonitor:
         self._listen_t = t
 
     def on_drive(self, t: float, driving: bool, target_speed_mps: float) -> None:
-        """The drive state: whether it drives, and the target part speed (nan: none)."""
+        """The drive state: whether it drives, and the target part speed (nan: none). An
+        infinite target raises ``ParameterError`` and changes nothing."""
+        if not (math.isnan(target_speed_mps) or math.isfinite(target_speed_mps)):
+            raise ParameterError(f"target_speed_mps={target_speed_mps!r} is not finite")
         self._advance(t)
         if driving and not self._driving:
             self._driving_since = t
             self._last_part_t = t  # starvation counts from the start of driving
             self._slow_since = math.nan
         self._driving = driving
-        if not (math.isnan(target_speed_mps) or math.isfinite(target_speed_mps)):
-            raise ParameterError(f"target_speed_mps={target_speed_mps!r} is not finite")
         self._target = target_speed_mps
 
     def on_estimate(self, t: float, mean_speed_mps: float, confidence: float) -> None:

@@ -247,7 +247,7 @@ class DriveInterface(LifecycleNode):
         if changed & {spec.name for spec in LIMIT_PARAMETERS} - {"heartbeat_timeout_s"}:
             note = controller.update_limits(limits_from(self._values), self._now())
             if note:
-                self.get_logger().warn(f"new limits moved the set point: {note}")
+                self.get_logger().warning(f"new limits moved the set point: {note}")
         if "heartbeat_timeout_s" in changed:
             controller.watchdog.timeout_s = float(self._values["heartbeat_timeout_s"])
         if "unreachable_speed" in changed:
@@ -274,7 +274,7 @@ class DriveInterface(LifecycleNode):
         try:
             limits = limits_from(values)
             speed_model = self._build_speed_model(values, limits)
-        except (ValueError, RuntimeError) as error:
+        except (ValueError, RuntimeError, OSError) as error:
             self.get_logger().error(f"configure failed: {error}")
             return TransitionCallbackReturn.FAILURE
         self._controller = DriveController(
@@ -317,6 +317,12 @@ class DriveInterface(LifecycleNode):
         )
         return TransitionCallbackReturn.SUCCESS
 
+    def _speed_table_not_cached(self, error: OSError) -> None:
+        self.get_logger().warning(
+            f"speed table computed but not cached ({error}); it is used all the same, and "
+            "computed again at the next configure"
+        )
+
     def _build_speed_model(self, values: dict[str, Any], limits: DriveLimits) -> SpeedModel | None:
         if not values["speed_model_enabled"]:
             self._speed_source = "disabled"
@@ -331,6 +337,7 @@ class DriveInterface(LifecycleNode):
             values["speed_model_frequency_steps"],
             values["speed_model_amplitude_steps"],
             values["speed_model_duration_s"],
+            on_store_error=self._speed_table_not_cached,
         )
         low, high = model.reachable_range()
         self._speed_source = (
@@ -409,7 +416,7 @@ class DriveInterface(LifecycleNode):
         try:
             self._teardown()
         except Exception as error:  # the context may already be shut down: log, go on
-            self.get_logger().warn(f"teardown on exit: {error}")
+            self.get_logger().warning(f"teardown on exit: {error}")
         super().destroy_node()
 
     # -- the loop ------------------------------------------------------------------------------
@@ -523,7 +530,7 @@ class DriveInterface(LifecycleNode):
             if command is None:
                 self._tracking_refused = start
                 self._tracking_note = tracker.status(now).reason
-                self.get_logger().warn(f"resonance tracking cannot start: {self._tracking_note}")
+                self.get_logger().warning(f"resonance tracking cannot start: {self._tracking_note}")
                 return
             self._tracking_refused = None
             self._tracking_note = ""
@@ -562,7 +569,7 @@ class DriveInterface(LifecycleNode):
         answer = controller.set_drive(now, command.frequency_hz, command.amplitude_percent, 0.0)
         controller.speed_mode, controller.target_speed_mps = speed_mode, target
         if answer.outcome is Outcome.REFUSED:
-            self.get_logger().warn(
+            self.get_logger().warning(
                 f"resonance tracking set point refused: {answer.reason}",
                 throttle_duration_sec=5.0,
             )
@@ -574,7 +581,7 @@ class DriveInterface(LifecycleNode):
         previous, self._tracking_mode = self._tracking_mode, tracker.mode
         status = tracker.status(now)
         if status.mode is TrackerMode.HOLD:
-            self.get_logger().warn(f"resonance tracking: {status.reason}")
+            self.get_logger().warning(f"resonance tracking: {status.reason}")
         elif previous is TrackerMode.HOLD and status.mode is TrackerMode.ACTIVE:
             self.get_logger().info("resonance tracking: speed feedback back, tracking again")
 
@@ -730,7 +737,7 @@ class DriveInterface(LifecycleNode):
             return response
         answer = self._controller.emergency_stop(self._now())
         self._tick()  # the zero goes out now, not at the next tick
-        self.get_logger().warn(f"emergency stop: {answer.message}")
+        self.get_logger().warning(f"emergency stop: {answer.message}")
         response.success, response.message = answer.success, answer.message
         return response
 

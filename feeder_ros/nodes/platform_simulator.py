@@ -46,13 +46,21 @@ from feeder_ros.node_interfaces import NodeInterface, ServiceSpec, TopicSpec
 from feeder_ros.nodes.platform_simulator_parameters import NODE_DEFAULTS, NODE_PARAMETERS
 from feeder_ros.nodes.ros_parameters import declare_parameters, validator
 from feeder_ros.nodes.runner import run_node
-from feeder_ros.physics.parameters import PARAMETER_SPECS, FeederParameters
+from feeder_ros.physics.drive import DriveError
+from feeder_ros.physics.errors import SimulationError
+from feeder_ros.physics.parameters import PARAMETER_SPECS, FeederParameters, ParameterError
 from feeder_ros.physics.simulation import EventKind, FeederSimulator, PartSpec, Phase
 from feeder_ros.sensors.accelerometer import AccelerometerModel
 from feeder_ros.sensors.part_presence import PartSensorArray
 from feeder_ros.srv import SpawnParts
 
 PHYSICS_DEFAULTS = FeederParameters().as_dict()
+#: drive commands beyond these are refused as malformed (no exciter comes near them, and the
+#: solver's numbers overflow long before the float range ends)
+MAX_COMMAND_FREQUENCY_HZ = 1e5
+MAX_COMMAND_AMPLITUDE_N = 1e6
+#: a drive command stamped further ahead of the simulation clock is refused (clocks that differ)
+FUTURE_STAMP_TOLERANCE_S = 1.0
 PARAMETERS = {**PARAMETER_SPECS, **NODE_PARAMETERS}
 
 # sensor data: best effort and volatile like qos_profile_sensor_data, but with a history deep
@@ -79,7 +87,9 @@ INTERFACE = NodeInterface(
             "drive/command",
             "feeder_ros/msg/DriveCommand",
             "reliable, depth 10",
-            "drive force; applied at its stamp, a stale one is a stop",
+            "drive force; applied at its stamp, a stale one is a stop; one stamped over 1 s "
+            "ahead, or outside 0 < f <= 1e5 Hz, 0 <= A <= 1e6 N, a finite ramp >= 0, is "
+            "ignored (warning)",
         ),
     ),
     publishes=(
@@ -198,6 +208,7 @@ class PlatformSimulator(Node):
         self.create_service(Trigger, "~/reset", self._on_reset)
         self.create_service(SpawnParts, "~/spawn_parts", self._on_spawn)
 
+        self._failure: str | None = None  # the last solver failure, until the drive runs again
         self._start()
         self._timer = self.create_timer(self._values["tick_period_s"], self._tick, clock=self._wall)
         self._diagnostics_pub = pub(DiagnosticArray, "/diagnostics", 10)
@@ -239,11 +250,15 @@ class PlatformSimulator(Node):
                         f"{before.forward_natural_frequency_hz:.2f} / "
                         f"{before.backward_natural_frequency_hz:.2f} Hz)"
                     )
-            if changed & {"imu_noise_density_mps2_per_sqrt_hz", "imu_bias_mps2"} | {
+            if changed & {
+                "imu_noise_density_mps2_per_sqrt_hz",
+                "imu_bias_mps2",
                 "imu_saturation_mps2",
                 "imu_seed",
             }:
                 self._accelerometer = self._make_accelerometer()
+            if "feed_interval_s" in changed:
+                self._last_feed_s = self._sim.time_s  # feeding counts from the change
             if "real_time_factor" in changed:
                 self._rebase_pacing()
 
@@ -293,16 +308,22 @@ class PlatformSimulator(Node):
 
     # -- inputs --------------------------------------------------------------------------------
     def _on_command(self, message: DriveCommand) -> None:
-        values = (message.frequency_hz, message.amplitude_n, message.ramp_time_s)
-        if message.enabled and not (
-            all(math.isfinite(v) for v in values)
-            and message.frequency_hz > 0.0
-            and message.amplitude_n >= 0.0
-            and message.ramp_time_s >= 0.0
+        # the ramp applies to a stop too; frequency and amplitude only to a command that drives
+        ramp_ok = math.isfinite(message.ramp_time_s) and message.ramp_time_s >= 0.0
+        if not ramp_ok or (
+            message.enabled
+            and not (
+                math.isfinite(message.frequency_hz)
+                and 0.0 < message.frequency_hz <= MAX_COMMAND_FREQUENCY_HZ
+                and 0.0 <= message.amplitude_n <= MAX_COMMAND_AMPLITUDE_N
+            )
         ):
-            self.get_logger().warn(
-                f"ignoring malformed drive command: frequency_hz={message.frequency_hz!r}, "
-                f"amplitude_n={message.amplitude_n!r}, ramp_time_s={message.ramp_time_s!r}"
+            self.get_logger().warning(
+                f"ignoring malformed drive command: enabled={message.enabled}, frequency_hz="
+                f"{message.frequency_hz!r} (0 < f <= {MAX_COMMAND_FREQUENCY_HZ:g}), amplitude_n="
+                f"{message.amplitude_n!r} (0 <= A <= {MAX_COMMAND_AMPLITUDE_N:g}), ramp_time_s="
+                f"{message.ramp_time_s!r} (finite, >= 0)",
+                throttle_duration_sec=5.0,
             )
             return
         with self._lock:
@@ -312,21 +333,55 @@ class PlatformSimulator(Node):
             if message.header.stamp.sec == 0 and message.header.stamp.nanosec == 0:
                 at = now  # unstamped: at once
             if timeout > 0.0 and at < now - timeout:
-                self.get_logger().warn(
+                self.get_logger().warning(
                     f"drive command stamped {now - at:.3f} s ago (> command_timeout_s="
                     f"{timeout}): treated as stop",
                     throttle_duration_sec=5.0,
                 )
                 self._stop_drive(now)
                 return
+            if at - now > FUTURE_STAMP_TOLERANCE_S:
+                # a stamp from a clock that does not match the simulation's (wall clock against
+                # /clock, or a wrong epoch): scheduled there it would also hold off the timeout
+                self.get_logger().warning(
+                    f"ignoring drive command stamped {at - now:.3f} s ahead of the simulation "
+                    f"clock (stamp {message.header.stamp.sec}.{message.header.stamp.nanosec:09d}"
+                    f", more than {FUTURE_STAMP_TOLERANCE_S:g} s ahead): do the commander and the"
+                    " simulator use the same clock (use_sim_time)?",
+                    throttle_duration_sec=5.0,
+                )
+                return
             at = max(at, now)
             frequency = message.frequency_hz if message.enabled else self._drive[0]
             amplitude = message.amplitude_n if message.enabled else 0.0
             if (frequency, amplitude) != self._drive or at > now:
                 # a repeated command only refreshes the deadline: the schedule stays short
-                self._sim.set_drive(frequency, amplitude, at_time_s=at, ramp_s=message.ramp_time_s)
+                try:
+                    self._sim.set_drive(
+                        frequency, amplitude, at_time_s=at, ramp_s=message.ramp_time_s
+                    )
+                except (DriveError, ParameterError) as error:  # e.g. a ramp over MAX_TIME_S
+                    self.get_logger().warning(
+                        f"ignoring drive command: {error}", throttle_duration_sec=5.0
+                    )
+                    return
                 self._drive = (frequency, amplitude)
+                if amplitude > 0.0:
+                    self._failure = None  # driven again: the next failure reports itself
             self._command_deadline_s = at + timeout if timeout > 0.0 else math.inf
+
+    def _recover(self, error: SimulationError) -> None:
+        """The solver cannot continue (for example an undamped branch driven exactly at its
+        natural frequency): the simulation restarts at rest with no drive, and the failure is
+        logged and reported on /diagnostics (ERROR) until the next command drives again."""
+        t = self._sim.time_s
+        self.get_logger().error(
+            f"simulation failed at t = {t:.6f} s with drive {self._drive[0]:g} Hz / "
+            f"{self._drive[1]:g} N: {error}; restarted at rest with the drive off",
+            throttle_duration_sec=5.0,
+        )
+        self._start()
+        self._failure = f"simulation failed at t = {t:.6f} s ({error}); restarted at rest"
 
     def _stop_drive(self, at_s: float) -> None:
         if self._drive[1] != 0.0:
@@ -412,11 +467,15 @@ class PlatformSimulator(Node):
             target = self._target_time()
             if target <= self._sim.time_s:
                 return
-            if target > self._command_deadline_s:
-                self._advance(self._command_deadline_s)
-                self._stop_drive(self._sim.time_s)
-            self._feed(target)
-            self._advance(target)
+            try:
+                if target > self._command_deadline_s:
+                    self._advance(self._command_deadline_s)
+                    self._stop_drive(self._sim.time_s)
+                self._feed(target)
+                self._advance(target)
+            except SimulationError as error:
+                self._recover(error)
+                return
         if self._clock_pub is not None:
             self._clock_pub.publish(ClockMessage(clock=self._stamp(target)))
 
@@ -446,11 +505,17 @@ class PlatformSimulator(Node):
                 "forward_natural_frequency_hz": f"{plant.forward_natural_frequency_hz:.4g}",
                 "backward_natural_frequency_hz": f"{plant.backward_natural_frequency_hz:.4g}",
             }
+            failure = self._failure
+        level, text = DiagnosticStatus.OK, "running"
+        if failure is not None:
+            level, text = DiagnosticStatus.ERROR, failure
+        elif lag >= 0.1:
+            level, text = DiagnosticStatus.WARN, f"{lag:.2f} s behind the wall clock"
         status = DiagnosticStatus(
             name=f"{self.get_fully_qualified_name()}: simulation",
             hardware_id="simulated feeder",
-            level=DiagnosticStatus.OK if lag < 0.1 else DiagnosticStatus.WARN,
-            message="running" if lag < 0.1 else f"{lag:.2f} s behind the wall clock",
+            level=level,
+            message=text,
             values=[KeyValue(key=k, value=v) for k, v in values.items()],
         )
         array = DiagnosticArray(status=[status])

@@ -34,7 +34,7 @@ from feeder_ros.node_interfaces import NodeInterface, TopicSpec
 from feeder_ros.nodes.ros_parameters import declare_parameters, validator
 from feeder_ros.nodes.runner import run_node
 from feeder_ros.nodes.stall_detector import StallDetector
-from feeder_ros.physics.parameters import ParameterSpec
+from feeder_ros.physics.parameters import ParameterError, ParameterSpec
 
 _TIMES = (
     ("alarm_delay_s", "a speed error must last this long to raise under/overspeed"),
@@ -250,7 +250,14 @@ class SpeedMonitorNode(Node):
         )
         with self._lock:
             self._has_drive_state = True
-            self._monitor.on_drive(self._now(), driving and message.amplitude_percent > 0.0, target)
+            try:
+                self._monitor.on_drive(
+                    self._now(), driving and message.amplitude_percent > 0.0, target
+                )
+            except ParameterError as error:
+                self.get_logger().warning(
+                    f"ignoring drive/state message: {error}", throttle_duration_sec=5.0
+                )
 
     def _on_command(self, message: DriveCommand) -> None:
         with self._lock:

@@ -142,6 +142,9 @@ DEFAULTS: dict[str, Any] = {
     "startup_timeout_s": 10.0,
 }
 DIAGNOSTICS_PERIOD_S = 1.0  # the diagnostics timer's period (a later tick: the node stalled)
+#: an accelerometer batch with a longer sample period is refused (the estimator needs a fast
+#: accelerometer; a period in ns or ms sent as seconds would put stamps far in the future)
+MAX_SAMPLE_PERIOD_S = 1.0
 SENSOR_QOS = QoSProfile(depth=500, reliability=ReliabilityPolicy.BEST_EFFORT)
 RELIABLE_QOS = QoSProfile(depth=1000, reliability=ReliabilityPolicy.RELIABLE)
 COMMAND_QOS = QoSProfile(depth=10, reliability=ReliabilityPolicy.RELIABLE)
@@ -331,7 +334,7 @@ class VehicleEstimatorNode(Node):
                 try:
                     stamp_s, acceleration = imu_sample(raw)
                 except ValueError as error:
-                    self.get_logger().warn(
+                    self.get_logger().warning(
                         f"ignoring Imu message: {error}", throttle_duration_sec=5.0
                     )
                     continue
@@ -368,9 +371,10 @@ class VehicleEstimatorNode(Node):
         )
         values = np.asarray(columns[self._axis], dtype=np.float64)
         period = message.sample_period_s
-        if not (math.isfinite(period) and period > 0.0) or values.size == 0:
-            self.get_logger().warn(
-                f"ignoring accelerometer batch: sample_period_s={period!r}, {values.size} samples",
+        if not (0.0 < period <= MAX_SAMPLE_PERIOD_S) or values.size == 0:  # False for nan
+            self.get_logger().warning(
+                f"ignoring accelerometer batch: sample_period_s={period!r} (0 < period <= "
+                f"{MAX_SAMPLE_PERIOD_S:g} s), {values.size} samples",
                 throttle_duration_sec=5.0,
             )
             return
@@ -386,7 +390,7 @@ class VehicleEstimatorNode(Node):
     def _on_command(self, message: DriveCommand) -> None:
         frequency = message.frequency_hz
         if not (math.isfinite(frequency) and frequency > 0.0):
-            self.get_logger().warn(
+            self.get_logger().warning(
                 f"ignoring drive command with frequency_hz={frequency!r}",
                 throttle_duration_sec=5.0,
             )
@@ -398,7 +402,7 @@ class VehicleEstimatorNode(Node):
             try:
                 self._estimator.set_drive(*drive)
             except ValueError as error:
-                self.get_logger().warn(f"ignoring drive command: {error}")
+                self.get_logger().warning(f"ignoring drive command: {error}")
             else:
                 self._drive = drive
 
@@ -432,7 +436,8 @@ class VehicleEstimatorNode(Node):
 
     def _to_message(self, record: EstimateRecord) -> VehicleEstimate:
         message = VehicleEstimate()
-        if math.isfinite(record.t_s):  # no stamp (0) before the first sample
+        # no stamp (0) before the first sample, nor for a time a stamp cannot hold (int32 s)
+        if 0.0 <= record.t_s < 2.0**31 - 1.0:
             seconds = math.floor(record.t_s)
             message.header.stamp.sec = int(seconds)
             message.header.stamp.nanosec = min(round((record.t_s - seconds) * 1e9), 999_999_999)

@@ -7,8 +7,10 @@ modulo 2*pi); the amplitude and the frequency jump. ``phi_0 = 0`` at ``t = 0``, 
 is ``A*sin(2*pi*f*t)``.
 
 A change with ``ramp_s > 0`` is applied as a staircase: the ramp is cut into
-``ceil(ramp_s/ramp_step_s)`` equal steps; on step ``j`` (of ``n``) the frequency and amplitude are
-the linear interpolation between the old and the new values at the step's end fraction ``(j+1)/n``,
+``ceil(ramp_s/ramp_step_s)`` equal steps, at most ``MAX_RAMP_STEPS`` (a longer ramp takes longer
+steps: its segments are built in Python and handed to the solver, so their count is bounded);
+on step ``j`` (of ``n``) the frequency and amplitude are the linear interpolation between the old
+and the new values at the step's end fraction ``(j+1)/n``,
 so the target is reached exactly at the end of the ramp. The simulator integrates this staircase
 exactly: the drive actually applied is the staircase, not a smooth ramp (with the default 1 ms step
 the difference is far below any physical uncertainty of a real exciter).
@@ -26,9 +28,23 @@ from dataclasses import dataclass, field
 import numpy as np
 import numpy.typing as npt
 
-__all__ = ["DEFAULT_RAMP_STEP_S", "DriveChange", "DriveError", "DriveSchedule", "DriveSegments"]
+__all__ = [
+    "DEFAULT_RAMP_STEP_S",
+    "MAX_RAMP_STEPS",
+    "MAX_TIME_S",
+    "DriveChange",
+    "DriveError",
+    "DriveSchedule",
+    "DriveSegments",
+]
 
 DEFAULT_RAMP_STEP_S = 1e-3
+#: the most steps one ramp is cut into (10 s at the default step; a longer ramp, or a shorter
+#: ``ramp_step_s``, takes longer steps)
+MAX_RAMP_STEPS = 10_000
+#: the latest change time and the longest ramp [s] (some 30 years: beyond, the phase's
+#: arithmetic overflows)
+MAX_TIME_S = 1e9
 TWO_PI = 2.0 * math.pi
 
 
@@ -36,7 +52,7 @@ class DriveError(ValueError):
     """A drive value the model cannot accept; the message names the value."""
 
 
-def _check(name: str, value: float, allow_zero: bool) -> float:
+def _check(name: str, value: float, allow_zero: bool, at_most: float = math.inf) -> float:
     if isinstance(value, bool) or not isinstance(value, int | float):
         raise DriveError(f"{name}={value!r} is not a number")
     number = float(value)
@@ -45,6 +61,8 @@ def _check(name: str, value: float, allow_zero: bool) -> float:
     if number < 0.0 or (number == 0.0 and not allow_zero):
         relation = ">=" if allow_zero else ">"
         raise DriveError(f"{name}={value!r} must be {relation} 0")
+    if number > at_most:
+        raise DriveError(f"{name}={value!r} must be <= {at_most:g}")
     return number
 
 
@@ -59,10 +77,10 @@ class DriveChange:
     ramp_s: float = 0.0
 
     def __post_init__(self) -> None:
-        object.__setattr__(self, "time_s", _check("time_s", self.time_s, True))
+        object.__setattr__(self, "time_s", _check("time_s", self.time_s, True, MAX_TIME_S))
         object.__setattr__(self, "frequency_hz", _check("frequency_hz", self.frequency_hz, False))
         object.__setattr__(self, "amplitude_n", _check("amplitude_n", self.amplitude_n, True))
-        object.__setattr__(self, "ramp_s", _check("ramp_s", self.ramp_s, True))
+        object.__setattr__(self, "ramp_s", _check("ramp_s", self.ramp_s, True, MAX_TIME_S))
 
 
 @dataclass(frozen=True)
@@ -233,7 +251,8 @@ class DriveSchedule:
             if change.ramp_s <= 0.0:
                 add(change.time_s, change.frequency_hz, change.amplitude_n, 1)
                 continue
-            n = max(1, math.ceil(change.ramp_s / self.ramp_step_s - 1e-9))
+            ratio = change.ramp_s / self.ramp_step_s  # inf for an extreme pair: capped
+            n = max(1, math.ceil(ratio - 1e-9)) if ratio < MAX_RAMP_STEPS else MAX_RAMP_STEPS
             for j in range(n):
                 frac = (j + 1) / n
                 add(

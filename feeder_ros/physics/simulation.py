@@ -588,10 +588,14 @@ class FeederSimulator:
             raise ParameterError(
                 f"kinetic_friction={mu_d!r} must not exceed static_friction={mu_s!r}"
             )
-        targets = range(len(self._specs)) if part is None else [part]
+        if part is not None and (
+            isinstance(part, bool)
+            or not isinstance(part, int | np.integer)
+            or not 0 <= part < len(self._specs)
+        ):
+            raise ParameterError(f"part={part!r} is not a part index (0..{len(self._specs) - 1})")
+        targets = range(len(self._specs)) if part is None else [int(part)]
         for i in targets:
-            if not 0 <= i < len(self._specs):
-                raise ParameterError(f"part={i!r} is not a part index (0..{len(self._specs) - 1})")
             self._specs[i] = replace(self._specs[i], static_friction=mu_s, kinetic_friction=mu_d)
         self._regroup()
 
@@ -609,10 +613,12 @@ class FeederSimulator:
                 f"stiffness_model={params.stiffness_model!r}: "
                 "FeederSimulator solves the sharp model"
             )
+        # every part resolved first: a refused change (a part's own friction against the new
+        # defaults) raises before anything is changed
+        masses = [spec.resolved(params)[0] for spec in self._specs]
         self._params = params
         self._model = _model_vector(params)
-        for i, spec in enumerate(self._specs):
-            mass, _, _ = spec.resolved(params)
+        for i, mass in enumerate(masses):
             self._m.mass[i] = mass
         self._regroup()
         self._state[_k.S_MODE] = self._classify()  # the switching variable may have changed

@@ -185,6 +185,42 @@ def test_limit_change_clamps_the_running_set_point() -> None:
     assert c.tick(5.0).amplitude_percent == pytest.approx(30.0)
 
 
+def test_limit_change_on_an_idle_or_stopping_drive_latches_no_fault() -> None:
+    # active, never started: the output rests at the default set point's frequency, zero force
+    idle = DriveController(LIMITS)
+    idle.activate(0.0)
+    resting = idle.tick(0.0)
+    assert not resting.enabled
+    raised = resting.frequency_hz + 10.0
+    idle.update_limits(DriveLimits(min_frequency_hz=raised), 1.0)
+    out = idle.tick(1.0)
+    assert idle.state is DriveState.IDLE, idle.fault_reason
+    assert not idle.fault_reason
+    assert (out.enabled, out.frequency_hz) == (False, raised)
+    # stopped while still ramping down: the soft stop goes on, into the new limits
+    c = running_controller()
+    c.heartbeat(3.0)
+    assert c.tick(3.0).amplitude_percent == pytest.approx(50.0)
+    c.stop(3.0)
+    c.update_limits(
+        DriveLimits(
+            max_frequency_hz=25.0,
+            max_frequency_rate_hz_per_s=10.0,
+            max_amplitude_rate_percent_per_s=25.0,
+        ),
+        3.0,
+    )
+    c.heartbeat(3.5)
+    out = c.tick(3.5)
+    assert c.state is DriveState.RAMPING, c.fault_reason
+    assert 0.0 < out.amplitude_percent < 50.0
+    assert 25.0 < out.frequency_hz < 30.0  # on its way down at the frequency rate
+    c.heartbeat(6.0)
+    out = c.tick(6.0)
+    assert c.state is DriveState.IDLE, c.fault_reason
+    assert (out.enabled, out.frequency_hz) == (False, 25.0)
+
+
 def test_target_speed_uses_the_model_and_refuses_or_clamps_the_unreachable() -> None:
     table = TableSpeedModel(
         [20.0, 30.0], [0.0, 50.0, 100.0], [[0.0, 0.01, 0.02], [0.0, 0.02, 0.05]]

@@ -100,3 +100,26 @@ def test_cache_is_keyed_by_the_inputs(tmp_path: Path) -> None:
     path.write_bytes(b"damaged")
     _, _, loaded_damaged = cached_speed_table(plant, limits, tmp_path, 5, 3, 0.5)
     assert not loaded_damaged  # recomputed, not crashed
+
+
+def test_a_table_that_cannot_be_cached_is_still_returned_or_the_error_raised(
+    tmp_path: Path,
+) -> None:
+    plant = FeederParameters()
+    limits = DriveLimits(min_frequency_hz=10.0, max_frequency_hz=60.0)
+    blocker = tmp_path / "a_file"
+    blocker.write_text("x")
+    cache = blocker / "sub"  # under a file: the directory cannot be made
+    with pytest.raises(OSError, match="a_file"):
+        cached_speed_table(plant, limits, cache, 5, 3, 0.5)
+    errors: list[OSError] = []
+    model, path, loaded = cached_speed_table(
+        plant, limits, cache, 5, 3, 0.5, on_store_error=errors.append
+    )
+    assert not loaded
+    assert not path.exists()
+    assert len(errors) == 1
+    assert isinstance(errors[0], NotADirectoryError | FileExistsError)
+    reference, _, _ = cached_speed_table(plant, limits, tmp_path / "ok", 5, 3, 0.5)
+    np.testing.assert_array_equal(model.speeds_mps, reference.speeds_mps)
+    assert sorted(p.name for p in tmp_path.iterdir()) == ["a_file", "ok"]

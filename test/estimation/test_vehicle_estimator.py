@@ -158,6 +158,8 @@ def test_nan_samples_are_dropped_and_reported(steady: SimulationResult, clean_ru
     a = _noisy(steady)
     bad = (steady.t_s >= 8.0) & (steady.t_s < 8.003)
     a[bad] = np.nan
+    # finite, but no sensor reads it (it overflowed the fit's arithmetic, and the push raised)
+    a[np.flatnonzero(steady.t_s >= 8.05)[0]] = 1e160
     t = steady.t_s.copy()
     t[np.flatnonzero(steady.t_s >= 8.1)[0]] = np.inf  # a broken stamp too
     est = _estimator()
@@ -165,8 +167,9 @@ def test_nan_samples_are_dropped_and_reported(steady: SimulationResult, clean_ru
     run = _feed(est, t, a)
     rec = _record_at(run, 8.2)
     assert rec.status == Status.INVALID_SAMPLES
-    # the three NaNs and the broken stamp, all inside the window
-    assert rec.status_message.startswith("4 non-finite samples dropped"), rec.status_message
+    # the three NaNs, the absurd sample and the broken stamp, all inside the window
+    message = rec.status_message
+    assert message.startswith("5 non-finite or out-of-range samples dropped"), message
     clean = _record_at(clean_run, 8.2)
     assert rec.mean_speed_mps == pytest.approx(clean.mean_speed_mps, rel=0.01)
     assert run.records[-1].status == Status.OK  # once the window has passed
@@ -194,10 +197,11 @@ def test_dropped_samples_are_counted_over_the_window_whatever_the_batching(
     _feed(est, t[:start], a[:start])
     run = _feed(est, t[start:end], a[start:end], batch=batch)  # every push processed alone
     messages = [(r.t_s, r.status_message) for r in run.records]
-    assert _record_at(run, 8.05).status_message.startswith("3 non-finite samples dropped"), messages
-    assert _record_at(run, 8.2).status_message.startswith("4 non-finite samples dropped"), messages
+    dropped = "non-finite or out-of-range samples dropped"
+    assert _record_at(run, 8.05).status_message.startswith(f"3 {dropped}"), messages
+    assert _record_at(run, 8.2).status_message.startswith(f"4 {dropped}"), messages
     # the NaNs leave the 2 s window at 10.003 s, the broken stamp stays until about 10.1 s
-    assert _record_at(run, 10.05).status_message.startswith("1 non-finite samples dropped")
+    assert _record_at(run, 10.05).status_message.startswith(f"1 {dropped}")
     assert run.records[-1].status == Status.OK
 
 

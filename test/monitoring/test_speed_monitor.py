@@ -220,6 +220,15 @@ def test_non_finite_time_is_refused() -> None:
         SpeedMonitor().evaluate(math.nan)
 
 
+def test_an_infinite_target_is_refused_and_changes_nothing() -> None:
+    monitor = SpeedMonitor(MonitorConfig(sensor_timeout_s=2.0))
+    with pytest.raises(ParameterError, match="target_speed_mps=inf"):
+        monitor.on_drive(1.0, True, math.inf)
+    # still idle: no driving since 1.0, so no alarm for the missing estimates
+    status = monitor.evaluate(10.0)
+    assert (status.level, status.alarms) == (0, 0), status
+
+
 def test_no_at_target_before_an_estimate_says_so() -> None:
     monitor = SpeedMonitor(MonitorConfig(sensor_timeout_s=2.0))
     monitor.on_drive(0.0, True, TARGET)

@@ -7,7 +7,7 @@ import math
 import numpy as np
 import pytest
 
-from feeder_ros.physics.drive import DriveChange, DriveError, DriveSchedule
+from feeder_ros.physics.drive import MAX_RAMP_STEPS, DriveChange, DriveError, DriveSchedule
 
 
 def test_constant_drive_is_a_sine() -> None:
@@ -41,6 +41,25 @@ def test_ramp_is_a_staircase_reaching_the_target_at_its_end() -> None:
     assert drive.values_at(0.11) == pytest.approx((40.0, 10.0))
     assert drive.values_at(0.1055) == pytest.approx((36.0, 6.0))
     assert seg.logged.tolist() == [0, 1] + [0] * 9
+
+
+@pytest.mark.parametrize(("ramp_s", "step_s"), [(1e6, 1e-3), (1e9, 1e-3), (1.0, 1e-300)])
+def test_a_ramp_is_cut_into_at_most_max_ramp_steps(ramp_s: float, step_s: float) -> None:
+    drive = DriveSchedule(
+        30.0, 0.0, (DriveChange(0.1, 40.0, 10.0, ramp_s=ramp_s),), ramp_step_s=step_s
+    )
+    seg = drive.segments()
+    assert seg.start_s.size == 1 + MAX_RAMP_STEPS
+    # still a staircase reaching the target at the ramp's end, in equal steps
+    assert drive.values_at(0.1 + ramp_s) == pytest.approx((40.0, 10.0))
+    np.testing.assert_allclose(np.diff(seg.start_s[1:]), ramp_s / MAX_RAMP_STEPS, rtol=1e-6)
+
+
+@pytest.mark.parametrize("name", ["time_s", "ramp_s"])
+def test_change_times_and_ramps_beyond_max_time_are_refused(name: str) -> None:
+    values = {"time_s": 0.0, "frequency_hz": 30.0, "amplitude_n": 1.0, "ramp_s": 0.0}
+    with pytest.raises(DriveError, match=f"{name}=1e\\+308 must be <= 1e\\+09"):
+        DriveChange(**{**values, name: 1e308})
 
 
 def test_a_new_change_supersedes_the_rest_of_a_ramp() -> None:

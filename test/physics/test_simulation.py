@@ -156,6 +156,30 @@ def test_spawn_friction_and_parameter_changes_live(case_study: FeederParameters)
     assert sim.part_count == 0
 
 
+def test_a_refused_live_change_leaves_the_simulator_as_it_was(
+    case_study: FeederParameters,
+) -> None:
+    parts = (PartSpec(0.01), PartSpec(0.02, static_friction=0.15))
+    sim = FeederSimulator(case_study.with_changes(coupling="two_way"), parts)
+    twin = FeederSimulator(case_study.with_changes(coupling="two_way"), parts)
+    sim.advance(0.1)
+    twin.advance(0.1)
+    before = sim.params
+    # the new default kinetic friction exceeds the second part's own static friction
+    bad = before.with_changes(static_friction=0.3, kinetic_friction=0.18, part_mass_kg=1.0)
+    with pytest.raises(ParameterError, match=r"kinetic_friction=0\.18"):
+        sim.set_parameters(bad)
+    assert sim.params == before
+    for part in (1.5, "1", True, 2, -1):
+        with pytest.raises(ParameterError, match=f"part={part!r} is not a part index"):
+            sim.set_part_friction(0.3, 0.2, part=part)  # type: ignore[arg-type]
+    # the refused calls changed nothing: the run goes on exactly as its twin's
+    samples = np.linspace(0.1, 0.5, 41)
+    run, reference = sim.advance(0.5, samples), twin.advance(0.5, samples)
+    np.testing.assert_array_equal(run.carrier_x_m, reference.carrier_x_m)
+    np.testing.assert_array_equal(run.part_x_m, reference.part_x_m)
+
+
 def test_set_drive_schedules_a_phase_continuous_change(case_study: FeederParameters) -> None:
     sim = FeederSimulator(case_study)
     sim.advance(0.1)
