@@ -47,8 +47,10 @@ def atomic_path(path: Path | str, suffix: str = ".tmp") -> Iterator[Path]:
         yield temporary
         os.chmod(temporary, _file_mode())  # mkstemp creates 0600
         os.replace(temporary, target)
-    except BaseException:
+    except BaseException as error:
         temporary.unlink(missing_ok=True)
+        if isinstance(error, OSError) and error.filename is None and error.errno is not None:
+            error.filename = str(target)  # a failed write (disk full, I/O error) names no file
         raise
 
 

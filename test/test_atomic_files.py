@@ -2,6 +2,7 @@
 
 from __future__ import annotations
 
+import errno
 import os
 from pathlib import Path
 
@@ -73,6 +74,32 @@ def test_a_missing_directory_is_named(tmp_path: Path) -> None:
     with pytest.raises(FileNotFoundError, match=r"directory .*nowhere does not exist"):
         atomic_bytes(missing / "x.csv", b"")
     assert not missing.exists()
+
+
+def test_a_failed_write_names_the_file(tmp_path: Path) -> None:
+    """A write error carries no file name (``[Errno 28] No space left on device``): the target is
+    added, so the user learns which output could not be written."""
+    target = tmp_path / "report.html"
+    target.write_text("old")
+
+    def disk_full() -> None:
+        with atomic_text(target) as stream:
+            stream.write("half")
+            raise OSError(errno.ENOSPC, os.strerror(errno.ENOSPC))  # what a full disk raises
+
+    def missing_input() -> None:
+        with atomic_path(target) as temporary:
+            (temporary.parent / "gone" / "x").read_bytes()
+
+    with pytest.raises(OSError, match="No space left on device") as caught:
+        disk_full()
+    assert caught.value.filename == str(target)
+    assert str(target) in str(caught.value)
+    assert target.read_text() == "old"
+    assert [p.name for p in tmp_path.iterdir()] == ["report.html"]
+    with pytest.raises(FileNotFoundError) as missing:  # an error naming its file keeps it
+        missing_input()
+    assert missing.value.filename == str(tmp_path / "gone" / "x")
 
 
 def test_a_figure_that_fails_half_way_leaves_nothing(tmp_path: Path) -> None:

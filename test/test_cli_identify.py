@@ -229,6 +229,23 @@ def test_bag_source(tmp_path: Path, capsys: pytest.CaptureFixture[str]) -> None:
     assert "2 part masses (0.03, 0.06 kg) for 1 bag(s)" in err
 
 
+def test_bag_source_reports_the_bag_problems(
+    tmp_path: Path, capsys: pytest.CaptureFixture[str]
+) -> None:
+    """A cut-short bag still gives its points, and the command says what the reader found."""
+    bag = tmp_path / "recorded"
+    write_sweep_bag(bag)
+    mcap = bag / "recorded_0.mcap"
+    data = mcap.read_bytes()
+    mcap.write_bytes(data[: len(data) * 3 // 4])
+    args = ["--source", "bag", str(bag), "--masses", "0.031", "--window", "1.5", "--no-fit"]
+    assert main(["identify", *args]) == 0
+    captured = capsys.readouterr()
+    assert "bag segments:" in captured.out
+    assert f"feeder identify: {bag}: warning: cut short" in captured.err
+    assert f"feeder identify: {bag}: problem: [cut_short] {mcap}" in captured.err
+
+
 def test_an_order_the_hold_out_cannot_score_is_left_out_not_the_whole_curve() -> None:
     """5 frequencies: order 0/1 can be scored on held-out pairs, 0/2 needs 6 (runs of 2 held out
     per fold): 0/2 is left out with the reason and the curve is still fitted."""

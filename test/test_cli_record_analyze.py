@@ -278,17 +278,20 @@ def test_analyze_cli_outputs_and_bad_input(tmp_path: Path) -> None:
     assert (tmp_path / "out" / "good_segments.csv").is_file()
 
 
+def analyze_into(bag: Path, out: Path) -> subprocess.CompletedProcess[str]:
+    """``feeder analyze BAG --output OUT`` in a subprocess."""
+    return subprocess.run(
+        [FEEDER, "analyze", str(bag), "--output", str(out)], capture_output=True, text=True
+    )
+
+
 def test_analyze_cli_reports_data_lost_to_a_corrupt_chunk(tmp_path: Path) -> None:
     """A corrupt chunk in the middle: the rest is analysed and written, but the loss is said (the
     counts and feed rates are short) and the exit status is 1."""
     write_feeder_bag(tmp_path / "bag", chunk_size=8192, extras=False)
     middle = corrupt_middle_chunk(tmp_path / "bag" / "bag_0.mcap")
     out = tmp_path / "out"
-    result = subprocess.run(
-        [FEEDER, "analyze", str(tmp_path / "bag"), "--output", str(out)],
-        capture_output=True,
-        text=True,
-    )
+    result = analyze_into(tmp_path / "bag", out)
     assert result.returncode == 1, result.stderr
     lost_s = (middle.message_end_time - middle.message_start_time) * 1e-9
     assert f"DATA LOST: 1 corrupt chunk(s) skipped, about {lost_s:.3g} s" in result.stdout
@@ -414,3 +417,21 @@ def test_record_sizes_are_checked_by_the_parser(
     assert exit_info.value.code == 2
     assert needle in capsys.readouterr().err
     assert not (tmp_path / "bag").exists()
+
+
+def test_analyze_cli_reports_a_missing_split_file_as_data_lost(tmp_path: Path) -> None:
+    """Not only corrupt chunks: a split file listed in metadata.yaml but gone is lost data too
+    (exit status 1, the loss named on stdout, stderr and in the JSON)."""
+    write_feeder_bag(tmp_path / "bag", chunk_size=8192, extras=False, split_s=1)
+    (tmp_path / "bag" / "bag_2.mcap").unlink()
+    out = tmp_path / "out"
+    result = analyze_into(tmp_path / "bag", out)
+    assert result.returncode == 1, result.stderr
+    assert "DATA LOST: 1 missing file(s), about 0.999 s of recording" in result.stdout
+    assert f"{tmp_path / 'bag'}: data lost (1 missing file(s)" in result.stderr
+    (bag,) = json.loads((out / "analysis.json").read_text())["bags"]
+    (loss,) = bag["data_losses"]
+    assert loss.startswith(f"[missing_file] {tmp_path / 'bag' / 'bag_2.mcap'}")
+    assert bag["chunks_lost"] == 0
+    assert bag["lost_s"] == pytest.approx(0.999)
+    assert "data lost" in (out / "comparison.csv").read_text()

@@ -3,11 +3,14 @@
 Write: ``BagWriter`` (bag directory with metadata.yaml version 9 and chunked, compressed, split MCAP
 files; crash safe chunk by chunk). Read: ``Bag`` / ``bag_info`` / ``read_columns`` (vectorised CDR
 decoding into numpy column batches, streamed chunk by chunk) / ``iter_messages`` (generic).
-Repair: ``reindex`` (metadata.yaml from the data; cut-short files finished with summary and footer).
+Repair: ``reindex`` (metadata.yaml from the data; cut-short files finished with summary and footer;
+files damaged otherwise left as they are). ``Bag.lost_data()`` lists the problems that lost recorded
+messages (``DATA_LOSS_KINDS``).
 """
 
 from feeder_ros.bag.cdr import ColumnPlan, decode_cdr
 from feeder_ros.bag.errors import (
+    DATA_LOSS_KINDS,
     BagError,
     BagProblem,
     BagWarning,
@@ -37,6 +40,7 @@ from feeder_ros.bag.schemas import ros2msg_schema, type_description_hash
 from feeder_ros.bag.writer import BagWriter, default_qos_yaml
 
 __all__ = [
+    "DATA_LOSS_KINDS",
     "LOG_TIME",
     "PUBLISH_TIME",
     "Bag",

@@ -37,7 +37,7 @@ from typing import Any
 import numpy as np
 import numpy.typing as npt
 
-from feeder_ros.bag.errors import BagError, UnsupportedLayoutError
+from feeder_ros.bag.errors import BagError, BagProblem, UnsupportedLayoutError
 from feeder_ros.bag.reader import LOG_TIME, Bag, ColumnBatch, bag_info, iter_messages, read_tables
 
 __all__ = [
@@ -59,6 +59,8 @@ PART_STATE_ARRAY = "feeder_ros/msg/PartStateArray"
 PART_SENSOR_EVENT = "feeder_ros/msg/PartSensorEvent"
 PART_EXIT = "feeder_ros/msg/PartExit"
 DIAGNOSTIC_ARRAY = "diagnostic_msgs/msg/DiagnosticArray"
+#: the longest CarrierStateBatch sample period taken (the vehicle estimator node's limit) [s]
+MAX_SAMPLE_PERIOD_S = 1.0
 
 _STAMP = ["header.stamp.sec", "header.stamp.nanosec"]
 REQUESTS: dict[str, list[str]] = {
@@ -185,9 +187,12 @@ class BagAnalysis:
     drive_source: str = "none"
     problems: list[str] = field(default_factory=list)
     cut_short: bool = False
-    #: chunks the reader skipped (corrupt): their messages are missing inside the analysed span, so
-    #: counts and feed rates come out short; ``lost_s`` is the recording time they spanned (as far
-    #: as their headers tell)
+    #: the reader's problems that mean recorded messages could not be read (``Bag.lost_data``:
+    #: corrupt chunks and records, missing, unreadable or non-MCAP files, an earlier split file cut
+    #: short, malformed messages): counts, exits and feed rates come out short
+    data_losses: list[BagProblem] = field(default_factory=list)
+    #: of those, the chunks skipped; ``lost_s`` is the recording time the losses spanned as far as
+    #: the files tell (chunk headers, metadata.yaml for a missing file): a lower bound
     chunks_lost: int = 0
     lost_s: float = 0.0
     error: str | None = None
@@ -208,8 +213,22 @@ class BagAnalysis:
 
     @property
     def data_lost(self) -> bool:
-        """Messages inside the analysed span are missing (chunks skipped)."""
-        return self.chunks_lost > 0
+        """Recorded messages could not be read (``data_losses``)."""
+        return bool(self.data_losses)
+
+    def loss_summary(self) -> str:
+        """What was lost, in a few words: "2 corrupt chunk(s) skipped, 1 missing file(s), about
+        0.5 s of recording" (the time when the files tell it)."""
+        counts: dict[str, int] = {}
+        for problem in self.data_losses:
+            counts[problem.kind] = counts.get(problem.kind, 0) + 1
+        words = [
+            f"{n} {_LOSS_WORDS.get(kind, kind.replace('_', ' ') + ' problem(s)')}"
+            for kind, n in counts.items()
+        ]
+        if self.lost_s > 0:
+            words.append(f"about {self.lost_s:.3g} s of recording")
+        return ", ".join(words)
 
     def totals(self) -> dict[str, float]:
         """Duration-weighted means over the driven segments, and the overall feed rate."""
@@ -240,6 +259,7 @@ class BagAnalysis:
             "end_ns": self.end_ns,
             "duration_s": self.duration_s,
             "cut_short": self.cut_short,
+            "data_losses": [str(p) for p in self.data_losses],
             "chunks_lost": self.chunks_lost,
             "lost_s": self.lost_s,
             "drive_source": self.drive_source,
@@ -272,6 +292,9 @@ class _Timeline:
         self.times: list[int] = []
         self.settings: list[Setting] = []
         self.last_t: int | None = None
+        #: samples left out because they are stamped before what the timeline already holds
+        self.dropped = 0
+        self.dropped_last_t = 0  # the timeline's end when the last of them was dropped
 
     def add(
         self,
@@ -285,6 +308,9 @@ class _Timeline:
         t, freq, amp = t[order], freq[order], amp[order]
         if self.last_t is not None:  # drop samples older than what the timeline already holds
             keep = t >= self.last_t
+            if not keep.all():
+                self.dropped += int(np.count_nonzero(~keep))
+                self.dropped_last_t = self.last_t
             t, freq, amp = t[keep], freq[keep], amp[keep]
             if len(t) == 0:
                 return
@@ -318,6 +344,30 @@ class _Accumulator:
         self.t_min: int | None = None
         self.t_max: int | None = None
         self.last_edge: dict[int, tuple[int, float, int]] = {}  # part -> (sensor, position, t)
+        #: values left out, by reason: (count, an example) for the problems list
+        self.left_out: dict[str, tuple[int, str]] = {}
+
+    def leave_out(self, reason: str, count: int, example: str) -> None:
+        if count:
+            seen, first = self.left_out.get(reason, (0, example))
+            self.left_out[reason] = (seen + count, first)
+
+    def notes(self, start: int | None) -> list[str]:
+        """The problems found in the values: what was left out and why."""
+        out = [
+            f"[bad_value] {count} {reason} (for example {example})"
+            for reason, (count, example) in self.left_out.items()
+        ]
+        for name, line in (("carrier state", self.state), ("drive command", self.command)):
+            if line.dropped:
+                at = (line.dropped_last_t - start) * 1e-9 if start is not None else math.nan
+                out.append(
+                    f"[out_of_order] {line.dropped} {name} sample(s) stamped before the ones "
+                    f"already read (up to t = {at:.6g} s) left out: header stamps out of "
+                    "order; one far ahead (or sim time mixed with wall time) hides the drive "
+                    "changes after it"
+                )
+        return out
 
     @property
     def timeline(self) -> _Timeline:
@@ -379,23 +429,27 @@ class _Accumulator:
         self.see(t)
         kind = batch.type
         if kind == CARRIER_STATE:
+            self._count_drive(batch["drive_frequency_hz"], batch["drive_amplitude_n"])
             self.state.add(t, batch["drive_frequency_hz"], batch["drive_amplitude_n"])
         elif kind == CARRIER_STATE_BATCH:
             self._state_batch(t, batch)
         elif kind == DRIVE_COMMAND:
             amp = np.where(batch["enabled"].astype(bool), batch["amplitude_n"], 0.0)
+            self._count_drive(batch["frequency_hz"], amp)
             self.command.add(t, batch["frequency_hz"], amp)
         elif kind == VEHICLE_ESTIMATE:
             ok = batch["status"] == 0
             for metric, name in (("est_speed", "mean_speed_mps"), ("est_slip", "slip_fraction")):
                 values = batch[name]
                 good = ok & np.isfinite(values)
+                self._count_bad(f"non-finite VehicleEstimate.{name} left out", ok & ~good, values)
                 self.add(metric, t[good], values[good])
         elif kind == PART_STATE_ARRAY:
             per_part = np.repeat(t, batch["parts._count"].astype(np.int64))
             on = batch["parts.on_track"].astype(bool)
             velocity = batch["parts.velocity_mps"]
             good = on & np.isfinite(velocity)
+            self._count_bad("non-finite PartState.velocity_mps left out", on & ~good, velocity)
             self.add("gt_speed", per_part[good], velocity[good])
             self.add("gt_slip", per_part[on], (batch["parts.phase"][on] != 0).astype(np.float64))
         elif kind == PART_SENSOR_EVENT:
@@ -403,11 +457,31 @@ class _Accumulator:
         elif kind == PART_EXIT:
             self.add("exits", t, np.ones(len(t)))
 
+    def _count_drive(self, freq: npt.NDArray[Any], amp: npt.NDArray[Any]) -> None:
+        """Non-finite drive settings count as "off" (see ``_Timeline.add``): say so."""
+        self._count_bad("non-finite drive amplitude(s) taken as off", ~np.isfinite(amp), amp)
+        driven = np.isfinite(amp) & (amp != 0.0)
+        self._count_bad(
+            "non-finite drive frequency(ies) taken as off", driven & ~np.isfinite(freq), freq
+        )
+
+    def _count_bad(self, reason: str, bad: npt.NDArray[np.bool_], values: npt.NDArray[Any]) -> None:
+        count = int(np.count_nonzero(bad))
+        if count:
+            self.leave_out(reason, count, repr(float(values[np.argmax(bad)])))
+
     def _state_batch(self, t: npt.NDArray[np.int64], batch: ColumnBatch) -> None:
         freq_cols, amp_cols = batch["drive_frequency_hz"], batch["drive_amplitude_n"]
-        periods = batch["sample_period_s"]
+        periods = np.asarray(batch["sample_period_s"], dtype=np.float64)
+        # the estimator's limit: a period must be > 0 and at most 1 s (NaN, inf, ns sent as s...)
+        bad = ~((periods > 0.0) & (periods <= MAX_SAMPLE_PERIOD_S))
+        self._count_bad(
+            "CarrierStateBatch message(s) with an impossible sample_period_s left out",
+            bad,
+            periods,
+        )
         stamps, freqs, amps = [], [], []
-        for k in range(len(t)):
+        for k in np.flatnonzero(~bad).tolist():
             freq = np.asarray(freq_cols[k], dtype=np.float64)
             amp = np.asarray(amp_cols[k], dtype=np.float64)
             m = min(len(freq), len(amp))
@@ -417,7 +491,9 @@ class _Accumulator:
         if stamps:
             all_t = np.concatenate(stamps)
             self.see(all_t)
-            self.state.add(all_t, np.concatenate(freqs), np.concatenate(amps))
+            all_freq, all_amp = np.concatenate(freqs), np.concatenate(amps)
+            self._count_drive(all_freq, all_amp)
+            self.state.add(all_t, all_freq, all_amp)
 
     def _sensor_events(self, t: npt.NDArray[np.int64], batch: ColumnBatch) -> None:
         rising = batch["present"].astype(bool)
@@ -525,11 +601,10 @@ def frequency_response(segments: Sequence[Segment]) -> list[FrequencyPoint]:
     return points
 
 
-def _diagnostics(path: Path, start: int) -> tuple[list[DiagnosticChange], list[str]]:
+def _diagnostics(bag: Bag, start: int) -> tuple[list[DiagnosticChange], list[str]]:
     changes: list[DiagnosticChange] = []
     notes: list[str] = []
     levels: dict[str, int] = {}
-    bag = Bag(path, warn=False)
     for raw in iter_messages(bag, types=[DIAGNOSTIC_ARRAY]):
         try:
             message = raw.decode()
@@ -586,28 +661,29 @@ def analyze_bag(
                 f"({str(err).strip(chr(34) + chr(39))}); that type is left out"
             )
     result.problems.extend(left_out)
-    seen_diagnostics = False
-    if bag.metadata is not None:
-        listed = bag.metadata.get("topics_with_message_count", [])
-        seen_diagnostics = any(
-            (t.get("topic_metadata") or {}).get("type") == DIAGNOSTIC_ARRAY for t in listed
-        )
-    else:
-        seen_diagnostics = True  # unknown: look
+    # the channels the main pass met (all of them, not only the feeder types): a recorder killed
+    # before it rewrote metadata.yaml leaves topics out of it, so the data decides
+    seen_diagnostics = DIAGNOSTIC_ARRAY in bag.channel_types.values()
     start = acc.t_min
+    result.problems.extend(acc.notes(start))
     diag: list[DiagnosticChange] = []
     if seen_diagnostics:
         diag_start = start if start is not None else 0
-        diag, notes = _diagnostics(bag.path, diag_start)
+        diag_bag = Bag(bag.path, warn=False)
+        diag, notes = _diagnostics(diag_bag, diag_start)
         result.problems.extend(notes)
+        for problem in diag_bag.problems:  # e.g. a chunk of diagnostics only, skipped as corrupt
+            if problem not in bag.problems:
+                bag.report(problem)
         if diag and start is None:  # diagnostics only: times relative to the first diagnostics
             first = diag[0].t_s
             diag = [DiagnosticChange(d.t_s - first, d.name, d.level, d.message) for d in diag]
     result.problems[:0] = [str(p) for p in bag.problems]
     result.cut_short = bag.cut_short
-    skipped = [p for p in bag.problems if p.kind == "corrupt_chunk"]
-    result.chunks_lost = len(skipped)
-    result.lost_s = sum(p.lost_ns or 0 for p in skipped) * 1e-9
+    lost = bag.lost_data()
+    result.data_losses = lost
+    result.chunks_lost = sum(p.kind == "corrupt_chunk" for p in lost)
+    result.lost_s = sum(p.lost_ns or 0 for p in lost) * 1e-9
     result.diagnostics = diag
     for kind, topics in result.topics.items():
         if len(topics) > 1:
@@ -632,6 +708,19 @@ def analyze_bag(
         s.index = i
     result.frequency_response = frequency_response(result.segments)
     return result
+
+
+_LOSS_WORDS = {
+    "corrupt_chunk": "corrupt chunk(s) skipped",
+    "corrupt_record": "damaged record(s) skipped over",
+    "missing_file": "missing file(s)",
+    "unreadable": "unreadable file(s)",
+    "not_mcap": "file(s) that are not MCAP",
+    "cut_short": "split file(s) cut short before the last",
+    "malformed_message": "chunk(s) with malformed messages dropped",
+    "unsupported_encoding": "chunk(s) with messages in an unknown encoding",
+    "unknown_channel": "chunk(s) with messages of an undefined channel",
+}
 
 
 def _main_pass(

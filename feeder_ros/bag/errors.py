@@ -12,6 +12,7 @@ from dataclasses import dataclass
 from pathlib import Path
 
 __all__ = [
+    "DATA_LOSS_KINDS",
     "BagError",
     "BagProblem",
     "BagWarning",
@@ -89,6 +90,23 @@ class WriterStateError(BagError):
         self.path = Path(path)
         self.reason = reason
         super().__init__(f"bag writer {self.path}: {reason}")
+
+
+#: Problem kinds that mean recorded messages could not be read: what is analysed of such a bag
+#: (message counts, exits, feed rates) comes out short. A file cut short counts too when it is not
+#: the bag's last file (``Bag.lost_data``).
+DATA_LOSS_KINDS = frozenset(
+    {
+        "corrupt_chunk",  # a chunk skipped
+        "corrupt_record",  # bytes skipped over (a damaged record header or record)
+        "missing_file",  # a split file listed in metadata.yaml is not there
+        "unreadable",  # a file that cannot be opened
+        "not_mcap",  # a file in the bag that is not MCAP (zero bytes, overwritten, ...)
+        "malformed_message",  # messages that end before their last field, dropped
+        "unsupported_encoding",  # messages without a plain CDR header, skipped
+        "unknown_channel",  # messages of a channel never defined (its record lost)
+    }
+)
 
 
 @dataclass(frozen=True)

@@ -170,13 +170,24 @@ def parse_ros2msg_schema(type_name: str, schema_text: str) -> MsgDefs:
 
 
 def _check_complete(top: str, defs: MsgDefs) -> None:
-    stack = [top]
-    seen: set[str] = set()
+    """Every type reachable from ``top`` is defined, and none contains itself (a ROS message
+    cannot: a recursive schema is corrupt, and decoding it would never end)."""
+    path: list[str] = []  # the chain of types from top being walked (depth first)
+    done: set[str] = set()
+    stack: list[tuple[str, bool]] = [(top, False)]
     while stack:
-        name = stack.pop()
-        if name in seen:
+        name, leaving = stack.pop()
+        if leaving:
+            path.pop()
+            done.add(name)
             continue
-        seen.add(name)
+        if name in path:
+            cycle = " -> ".join([*path[path.index(name) :], name])
+            raise MessageDefinitionError(top, f"the schema is recursive ({cycle})")
+        if name in done:
+            continue
         if name not in defs:
             raise MessageDefinitionError(top, f"the schema lacks the definition of {name}")
-        stack.extend(f.type for f in defs[name] if not f.is_primitive and not f.is_string)
+        path.append(name)
+        stack.append((name, True))
+        stack.extend((f.type, False) for f in defs[name] if not f.is_primitive and not f.is_string)

@@ -27,6 +27,7 @@ import yaml
 
 from feeder_ros.bag.cdr import ColumnPlan, decode_cdr
 from feeder_ros.bag.errors import (
+    DATA_LOSS_KINDS,
     BagError,
     BagProblem,
     BagWarning,
@@ -54,6 +55,18 @@ LOG_TIME = "_log_time_ns"
 PUBLISH_TIME = "_publish_time_ns"
 
 
+def _listed_duration_ns(info: Mapping[str, Any], name: str) -> int | None:
+    """The recording time metadata.yaml gives for the file ``name`` (None: not given)."""
+    try:
+        for entry in info.get("files") or []:
+            if Path(str(entry["path"])).name == name:
+                duration = int(entry["duration"]["nanoseconds"])
+                return duration if duration > 0 else None
+    except (KeyError, TypeError, ValueError, AttributeError):
+        pass
+    return None
+
+
 def _file_index(path: Path) -> tuple[int, str]:
     match = re.search(r"_(\d+)\.mcap$", path.name)
     return (int(match[1]) if match else -1, path.name)
@@ -78,6 +91,8 @@ class Bag:
         self.problems: list[BagProblem] = []
         self.metadata: dict[str, Any] | None = None
         self.cut_short = False
+        #: topic -> type of every channel met by a scan that has been read to its end
+        self.channel_types: dict[str, str] = {}
         self._defs: dict[tuple[str, str], MsgDefs | None] = {}
         self._plans: dict[tuple[str, str], ColumnPlan] = {}
         if self.path.is_file():
@@ -106,7 +121,10 @@ class Bag:
         try:
             data = yaml.safe_load(meta_path.read_text(encoding="utf-8"))
             info = data["rosbag2_bagfile_information"]
-            listed = [self.path / Path(p).name for p in info.get("relative_file_paths", [])]
+            names = info.get("relative_file_paths") or []
+            if not isinstance(names, list) or not all(isinstance(n, str) for n in names):
+                raise ValueError(f"relative_file_paths is not a list of file names: {names!r}")
+            listed = [self.path / Path(n).name for n in names]
             storage = info.get("storage_identifier", "")
         except (OSError, ValueError, yaml.YAMLError, KeyError, TypeError) as err:
             self.report(
@@ -124,7 +142,12 @@ class Bag:
         for p in listed:
             if not p.is_file():
                 self.report(
-                    BagProblem("missing_file", p, "listed in metadata.yaml but not present")
+                    BagProblem(
+                        "missing_file",
+                        p,
+                        "listed in metadata.yaml but not present",
+                        lost_ns=_listed_duration_ns(info, p.name),
+                    )
                 )
         for p in found:
             if p not in files:
@@ -134,6 +157,18 @@ class Bag:
                 files.append(p)
         return sorted(files, key=_file_index)
 
+    def lost_data(self) -> list[BagProblem]:
+        """The problems found so far that mean recorded messages could not be read (see
+        ``DATA_LOSS_KINDS``), and a file cut short that is not the bag's last: a killed recorder
+        cuts only its last file short, so an earlier one lost its end while the recording went
+        on."""
+        last = self.files[-1] if self.files else None
+        return [
+            p
+            for p in self.problems
+            if p.kind in DATA_LOSS_KINDS or (p.kind == "cut_short" and p.file != last)
+        ]
+
     def report(self, problem: BagProblem) -> None:
         self.problems.append(problem)
         if problem.kind == "cut_short":
@@ -142,8 +177,13 @@ class Bag:
             warnings.warn(str(problem), BagWarning, stacklevel=3)
 
     def scans(self) -> Iterator[FileScan]:
+        """One scan per file, in order; after a scan has been read, its channels are added to
+        ``channel_types``."""
         for path in self.files:
-            yield FileScan(path, self.report, self.verify_crc)
+            scan = FileScan(path, self.report, self.verify_crc)
+            yield scan
+            for channel in scan.channels.values():
+                self.channel_types.setdefault(channel.topic, channel.type)
 
     def definitions(self, channel: ChannelInfo) -> MsgDefs | None:
         """Parsed definitions for a channel: its ros2msg schema, else the installed .msg files."""

@@ -5,6 +5,12 @@ and a last MCAP file without summary and footer. ``reindex`` (like ``ros2 bag re
 messages of every file and rewrites metadata.yaml; with ``finish_files`` (default) it also rewrites
 each cut-short file from its readable messages, with summary and footer, so that readers which need
 a summary (rosbags, tools that seek by chunk index) accept the bag again.
+
+Nothing that could still be read is destroyed: only a file whose one problem is its missing end is
+rewritten (its incomplete last record is all it loses). A file damaged otherwise (not MCAP, a
+corrupt chunk or record, unreadable) is left byte for byte as it is, with a ``not_finished``
+problem naming why, and a split file listed in metadata.yaml but missing stays listed (with what the
+old metadata.yaml said of it), so the bag keeps saying that part of the recording is gone.
 """
 
 from __future__ import annotations
@@ -12,12 +18,14 @@ from __future__ import annotations
 import os
 from collections.abc import Callable
 from pathlib import Path
+from typing import Any
 
 from feeder_ros.bag.errors import BagProblem, MissingBagError
-from feeder_ros.bag.reader import Bag, BagInfo, bag_info
+from feeder_ros.bag.reader import Bag, BagInfo, _file_index, bag_info
 from feeder_ros.bag.scan import ChannelInfo, FileScan
 from feeder_ros.bag.schemas import type_description_hash
 from feeder_ros.bag.writer import (
+    _Channel,
     _FileStats,
     _McapFile,
     _Topic,
@@ -44,10 +52,16 @@ def _topic_of(channel: ChannelInfo) -> _Topic:
     )
 
 
+#: problems after which a cut-short file is still rewritten: they concern single messages, which
+#: the rewrite copies byte for byte
+_HARMLESS_TO_REWRITE = frozenset({"cut_short", "malformed_message", "unsupported_encoding"})
+
+
 def _count(
     path: Path, report: Callable[[BagProblem], None], topics: dict[str, _Topic]
 ) -> tuple[_FileStats, bool]:
-    """Messages per topic and time range of one file (from its indexes); is the file complete?"""
+    """Messages per topic and time range of one file (from its indexes); is the file complete?
+    ``topics`` is keyed by name and type: one name may carry two types."""
     stats = _FileStats(path)
     scan = FileScan(path, report)
     for chunk in scan.chunks(lambda _c: True, decode=False):
@@ -55,38 +69,42 @@ def _count(
             if len(times) == 0:
                 continue
             channel = scan.channels[cid]
-            topic = topics.setdefault(channel.topic, _topic_of(channel))
+            topic = topics.setdefault(f"{channel.topic}\0{channel.type}", _topic_of(channel))
             topic.count += len(times)
             stats.count += len(times)
             lo, hi = int(times.min()), int(times.max())
             stats.start = lo if stats.start is None else min(stats.start, lo)
             stats.end = hi if stats.end is None else max(stats.end, hi)
     for channel in scan.channels.values():
-        topics.setdefault(channel.topic, _topic_of(channel))
+        topics.setdefault(f"{channel.topic}\0{channel.type}", _topic_of(channel))
     return stats, scan.complete
 
 
 def _finish(path: Path, bag: Bag, compression: str, meta_text: str, distro: str) -> None:
-    """Rewrite a cut-short file from its readable messages, with summary and footer."""
+    """Rewrite a cut-short file from its readable messages, with summary and footer; if reading
+    every chunk finds damage the counting pass could not see (a corrupt chunk: counting reads
+    only the indexes), the file is left as it is instead."""
     tmp = path.with_name(path.name + ".reindex")
     tmp.unlink(missing_ok=True)
     out = _McapFile(tmp, compression, 3)
+    damage: set[str] = set()
 
     def report(problem: BagProblem) -> None:
+        if problem.kind not in _HARMLESS_TO_REWRITE:
+            damage.add(problem.kind)
         if problem not in bag.problems:  # the counting pass found it already
             bag.report(problem)
 
     scan = FileScan(path, report)
-    topics: dict[int, _Topic] = {}
+    channels: dict[int, _Channel] = {}  # by the channel id in the old file
     try:
         for chunk in scan.chunks(lambda _c: True):
             for cid, log, pub, data in chunk.messages():
-                topic = topics.get(cid)
-                if topic is None:
-                    topic = _topic_of(scan.channels[cid])
-                    topics[cid] = topic
-                    out.add_channel(topic)
-                out.add_message(out.channels[topic.name], data, log, pub)
+                channel = channels.get(cid)
+                if channel is None:
+                    channel = out.add_channel(_topic_of(scan.channels[cid]))
+                    channels[cid] = channel
+                out.add_message(channel, data, log, pub)
                 if len(out.chunk) >= 1 << 20:
                     out.finish_chunk()
         out.close(meta_text, distro)
@@ -94,7 +112,49 @@ def _finish(path: Path, bag: Bag, compression: str, meta_text: str, distro: str)
         out.stream.close()
         tmp.unlink(missing_ok=True)
         raise
+    if damage:
+        tmp.unlink()
+        bag.report(_not_finished(path, damage))
+        return
     os.replace(tmp, path)
+
+
+def _not_finished(path: Path, damage: set[str]) -> BagProblem:
+    return BagProblem(
+        "not_finished",
+        path,
+        f"left unchanged, without a footer: damaged ({', '.join(sorted(damage))}), not only cut "
+        "short; a rewrite would drop what is past the damage",
+    )
+
+
+def _keep_missing(meta: dict[str, Any], old: dict[str, Any], bag: Bag) -> None:
+    """List again the files the old metadata.yaml listed that are missing, with its entries for
+    them (the messages counted in ``meta`` are those present)."""
+    missing = {p.file.name for p in bag.problems if p.kind == "missing_file" and p.file}
+    if not missing:
+        return
+    entries = {}
+    for entry in old.get("files") or []:
+        try:
+            entries[Path(str(entry["path"])).name] = dict(entry)
+        except (KeyError, TypeError, ValueError):
+            continue
+    names = [*meta["relative_file_paths"], *sorted(missing)]
+    names.sort(key=lambda n: _file_index(Path(n)))
+    by_name = {e["path"]: e for e in meta["files"]}
+    meta["relative_file_paths"] = names
+    meta["files"] = [
+        by_name.get(n)
+        or entries.get(n)
+        or {
+            "path": n,
+            "starting_time": {"nanoseconds_since_epoch": 0},
+            "duration": {"nanoseconds": 0},
+            "message_count": 0,
+        }
+        for n in names
+    ]
 
 
 def reindex(
@@ -117,19 +177,30 @@ def reindex(
     files: list[_FileStats] = []
     cut_short: list[int] = []
     for file in bag.files:
-        stats, complete = _count(file, bag.report, topics)
+        found: list[BagProblem] = []
+
+        def report(problem: BagProblem, found: list[BagProblem] = found) -> None:
+            found.append(problem)
+            bag.report(problem)
+
+        stats, complete = _count(file, report, topics)
         files.append(stats)
-        if not complete:
+        if complete:
+            continue
+        damage = {p.kind for p in found} - _HARMLESS_TO_REWRITE
+        if not damage:
             cut_short.append(len(files) - 1)
+        elif finish_files:
+            bag.report(_not_finished(file, damage))
     if finish_files and cut_short:
         meta_text = metadata_yaml(bag_metadata(files, list(topics.values()), custom, distro), True)
         for index in cut_short:
             _finish(files[index].path, bag, compression, meta_text, distro)
         topics = {}  # count again: unreadable chunks of the cut-short files were dropped
         files = [_count(file, lambda _p: None, topics)[0] for file in bag.files]
-    write_metadata_file(
-        directory, metadata_yaml(bag_metadata(files, list(topics.values()), custom, distro))
-    )
+    meta = bag_metadata(files, list(topics.values()), custom, distro)
+    _keep_missing(meta, old, bag)
+    write_metadata_file(directory, metadata_yaml(meta))
     problems: list[BagProblem] = list(bag.problems)
     info = bag_info(Bag(directory, warn=False))
     info.problems = problems + info.problems

@@ -119,8 +119,8 @@ def format_summary(analyses: Sequence[BagAnalysis]) -> str:
         parts.append(head)
         if a.data_lost:
             parts.append(
-                f"  DATA LOST: {a.chunks_lost} corrupt chunk(s) skipped, about {a.lost_s:.3g} s "
-                "of recording: counts, exits and feed rates are short (see the problems below)"
+                f"  DATA LOST: {a.loss_summary()}: counts, exits and feed rates are short "
+                "(see the problems below)"
             )
         counts = ", ".join(f"{k.rsplit('/', 1)[-1]} {v}" for k, v in sorted(a.messages.items()))
         if counts:
@@ -326,8 +326,8 @@ def write_outputs(analyses: Sequence[BagAnalysis], directory: Path) -> list[Path
         )
         if a.data_lost:
             sections.append(
-                f"<p class='error'><b>Data lost</b>: {a.chunks_lost} corrupt chunk(s) skipped, "
-                f"about {a.lost_s:.3g} s of recording: counts, exits and feed rates are short.</p>"
+                f"<p class='error'><b>Data lost</b>: {html.escape(a.loss_summary())}: counts, "
+                "exits and feed rates are short.</p>"
             )
         rows = segment_rows(a)
         put(f"{stem}_segments.csv", _csv(rows))

@@ -113,7 +113,9 @@ class _McapFile:
         self.stream: BinaryIO = open(path, "xb")  # noqa: SIM115 - closed in close()
         self.offset = 0
         self.schemas: dict[str, int] = {}
-        self.channels: dict[str, _Channel] = {}
+        self.channels: dict[str, _Channel] = {}  # by topic name (the latest channel of a name)
+        #: every channel (reindex copies a file where one name may have channels of two types)
+        self.all_channels: list[_Channel] = []
         self.schema_records: list[bytes] = []
         self.channel_records: list[bytes] = []
         self.chunk_indexes: list[bytes] = []
@@ -142,8 +144,9 @@ class _McapFile:
             record = encode_record(Op.SCHEMA, body + struct.pack("<I", len(raw)) + raw)
             self.schema_records.append(record)
             out += record
-        channel = _Channel(len(self.channels) + 1, topic)
+        channel = _Channel(len(self.all_channels) + 1, topic)
         self.channels[topic.name] = channel
+        self.all_channels.append(channel)
         metadata = {"offered_qos_profiles": topic.qos_yaml, "topic_type_hash": topic.type_hash}
         body = struct.pack("<HH", channel.id, schema_id) + encode_str(topic.name)
         record = encode_record(Op.CHANNEL, body + encode_str("cdr") + encode_map(metadata))
@@ -200,7 +203,7 @@ class _McapFile:
         index_offsets: dict[int, int] = {}
         pos = chunk_offset + len(chunk_record)
         parts = [chunk_record]
-        for channel in self.channels.values():
+        for channel in self.all_channels:
             if not channel.index:
                 continue
             pairs = np.frombuffer(channel.index, dtype="<u8").reshape(-1, 2)
@@ -248,14 +251,14 @@ class _McapFile:
         )
         self._write(meta + encode_record(Op.DATA_END, struct.pack("<I", 0)))
         summary_start = self.offset
-        counts = {c.id: c.count for c in self.channels.values()}
+        counts = {c.id: c.count for c in self.all_channels}
         statistics = encode_record(
             Op.STATISTICS,
             struct.pack(
                 "<QHIIIIQQ",
                 self.message_count,
                 len(self.schemas),
-                len(self.channels),
+                len(self.all_channels),
                 0,
                 len(self.metadata_indexes),
                 self.chunk_count,

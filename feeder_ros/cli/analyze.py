@@ -90,8 +90,8 @@ def run(args: argparse.Namespace) -> int:
             status = 1
         elif a.data_lost:
             print(
-                f"feeder analyze: {a.path}: {a.chunks_lost} corrupt chunk(s) skipped, about "
-                f"{a.lost_s:.3g} s of recording lost: its counts and feed rates are short",
+                f"feeder analyze: {a.path}: data lost ({a.loss_summary()}): its counts and "
+                "feed rates are short",
                 file=sys.stderr,
             )
             status = 1

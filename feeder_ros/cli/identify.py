@@ -51,7 +51,7 @@ from feeder_ros.identification.sweep import (
 from feeder_ros.yaml_files import YamlFileError, read_yaml
 
 if TYPE_CHECKING:
-    pass
+    from feeder_ros.bag.analysis import BagAnalysis
 
 __all__ = ["HELP", "PLAN_NAME", "add_arguments", "default_plan_path", "run"]
 
@@ -348,7 +348,31 @@ def _sweep_bag(args: argparse.Namespace, plan: SweepPlan, show: bool) -> SweepRe
         bar.close()
     sources = ", ".join(f"{n} from {name}" for name, n in swept.speed_sources().items())
     print(f"bag segments: {len(swept.result)} driven ({sources})")
+    for analysis in swept.analyses:
+        _report_bag_problems(analysis)
     return swept.result
+
+
+#: problems listed per bag on stderr (the rest are counted)
+_MAX_PROBLEMS_SHOWN = 10
+
+
+def _report_bag_problems(analysis: BagAnalysis) -> None:
+    """What the bag reader worked around, on stderr: the points come from what could be read."""
+    where = f"feeder identify: {analysis.path}"
+    if analysis.data_lost:
+        print(
+            f"{where}: warning: data lost ({analysis.loss_summary()}): its segments are measured "
+            "on what could be read",
+            file=sys.stderr,
+        )
+    if analysis.cut_short:
+        print(f"{where}: warning: cut short (the recorder did not close the bag)", file=sys.stderr)
+    for problem in analysis.problems[:_MAX_PROBLEMS_SHOWN]:
+        print(f"{where}: problem: {problem}", file=sys.stderr)
+    if len(analysis.problems) > _MAX_PROBLEMS_SHOWN:
+        more = len(analysis.problems) - _MAX_PROBLEMS_SHOWN
+        print(f"{where}: ... and {more} more problem(s)", file=sys.stderr)
 
 
 def _sweep_csv(args: argparse.Namespace) -> SweepResult:

@@ -64,6 +64,10 @@ __all__ = [
 AMPLITUDE_FLOOR_FRACTION = 0.01
 #: a time jump back by more than this restarts the cycle (a restarted or replayed clock)
 CLOCK_JUMP_S = 1.0
+#: a reading stamped more than this ahead of the tracker's clock (its latest start or update) is
+#: ignored: it would count as fresh feedback until the clock reaches it, and keep tracking ACTIVE
+#: with no reading coming in (two clocks mixed: sim time and wall time)
+FUTURE_STAMP_TOLERANCE_S = 1.0
 
 
 class TrackerError(ValueError):
@@ -322,18 +326,22 @@ class ResonanceTracker:
         self._off(reason)
         return command
 
-    def feedback(self, t_s: float, speed_mps: float) -> None:
-        """A speed reading stamped ``t_s`` (when it was measured). Non-finite ones are ignored."""
+    def feedback(self, t_s: float, speed_mps: float) -> bool:
+        """A speed reading stamped ``t_s`` (when it was measured); False if it is ignored: not
+        finite, or stamped over ``FUTURE_STAMP_TOLERANCE_S`` ahead of the tracker's clock."""
         if not (math.isfinite(t_s) and math.isfinite(speed_mps)):
-            return
+            return False
+        if t_s > self._last_now + FUTURE_STAMP_TOLERANCE_S:
+            return False  # also every reading before the first start (which forgets them anyway)
         self._speed = speed_mps
         self._last_valid_s = max(self._last_valid_s, t_s)
         if self._mode is not TrackerMode.ACTIVE or t_s < self._half_start + self._settings.settle_s:
-            return  # before the half-period's measurement window: the previous drive's speed
+            return True  # before the half-period's measurement window: the previous drive's speed
         self._half_sum += speed_mps * math.copysign(1.0, self._target)
         self._half_count += 1
         if t_s >= self._half_start + self._settings.half_period_s:
             self._half_done = True
+        return True
 
     def update(self, now_s: float) -> TrackerCommand | None:
         """Advance to ``now_s``; returns a new set point when the drive is to change."""

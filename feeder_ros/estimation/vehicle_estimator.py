@@ -43,6 +43,7 @@ import collections
 import contextlib
 import enum
 import math
+import numbers
 from dataclasses import dataclass, field
 from typing import Any
 
@@ -63,7 +64,7 @@ from feeder_ros.estimation.stick_slip_observer import (
     PartModel,
     StickSlipObserver,
 )
-from feeder_ros.physics.parameters import ParameterError
+from feeder_ros.physics.parameters import ParameterError, is_number
 
 __all__ = [
     "EstimateTrace",
@@ -144,7 +145,7 @@ class EstimatorConfig:
         )
         for name in positive:
             value = getattr(self, name)
-            if not (isinstance(value, int | float) and math.isfinite(value) and value > 0.0):
+            if not (is_number(value) and math.isfinite(value) and value > 0.0):
                 raise ParameterError(f"{name}={value!r} must be finite and > 0")
         for name in (
             "max_bridge_s",
@@ -153,9 +154,13 @@ class EstimatorConfig:
             "batch_interval_s",
         ):
             value = getattr(self, name)
-            if not (isinstance(value, int | float) and math.isfinite(value) and value >= 0.0):
+            if not (is_number(value) and math.isfinite(value) and value >= 0.0):
                 raise ParameterError(f"{name}={value!r} must be finite and >= 0")
-        if not (isinstance(self.max_period_order, int) and self.max_period_order >= 1):
+        if not (
+            isinstance(self.max_period_order, numbers.Integral)
+            and not isinstance(self.max_period_order, bool)
+            and self.max_period_order >= 1
+        ):
             raise ParameterError(f"max_period_order={self.max_period_order!r} must be an int >= 1")
         if self.gap_factor <= 1.0:
             raise ParameterError(f"gap_factor={self.gap_factor!r} must be > 1")

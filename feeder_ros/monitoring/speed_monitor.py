@@ -232,7 +232,10 @@ class SpeedMonitor:
             self._exits.popleft()
         driving_for = t - self._driving_since if self._driving else 0.0
         window = min(cfg.feed_window_s, driving_for) if self._driving else cfg.feed_window_s
-        feed_rate = len(self._exits) * 60.0 / window if window > 0.0 else 0.0
+        # a window shortened to the time since the drive started counts only the exits in it:
+        # parts that left before a restart would give a huge rate over a few milliseconds
+        exits = sum(1 for exit_t in self._exits if exit_t >= t - window)
+        feed_rate = exits * 60.0 / window if window > 0.0 else 0.0
 
         alarms = 0
         fresh = t - self._speed_t <= cfg.sensor_timeout_s

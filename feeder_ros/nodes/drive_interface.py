@@ -44,6 +44,7 @@ from feeder_ros.drive.controller import DriveController, DriveState
 from feeder_ros.drive.limits import DriveLimits, Outcome
 from feeder_ros.drive.modbus import ModbusTcpBackend
 from feeder_ros.drive.resonance_tracker import (
+    FUTURE_STAMP_TOLERANCE_S,
     ResonanceTracker,
     TrackerCommand,
     TrackerMode,
@@ -590,14 +591,27 @@ class DriveInterface(LifecycleNode):
             return
         if not message.mean_speed_confidence >= self._values["tracking.min_confidence"]:
             return  # an estimate without enough information is no reading
-        stamp = _stamp_s(message.header.stamp) or self._now()
-        self._tracker.feedback(stamp, message.mean_speed_mps)
+        self._feedback(message.header.stamp, message.mean_speed_mps, "estimate")
 
     def _on_speed_status(self, message: SpeedStatus) -> None:
         if self._tracker is None:
             return
-        stamp = _stamp_s(message.header.stamp) or self._now()
-        self._tracker.feedback(stamp, message.estimated_speed_mps)
+        self._feedback(message.header.stamp, message.estimated_speed_mps, "speed_status")
+
+    def _feedback(self, stamp: Any, speed_mps: float, topic: str) -> None:
+        """A speed reading for the tracker; one stamped far ahead of this node's clock is ignored
+        (by the tracker) with a warning: it would keep tracking ACTIVE with no fresh reading."""
+        assert self._tracker is not None
+        now = self._now()
+        t_s = _stamp_s(stamp) or now
+        if t_s > now + FUTURE_STAMP_TOLERANCE_S and math.isfinite(speed_mps):
+            self.get_logger().warning(
+                f"{topic} stamped {t_s:.3f} s, {t_s - now:.3g} s ahead of this node's clock "
+                f"(over {FUTURE_STAMP_TOLERANCE_S:g} s): ignored by resonance tracking; do both "
+                "nodes use the same clock (use_sim_time)?",
+                throttle_duration_sec=5.0,
+            )
+        self._tracker.feedback(t_s, speed_mps)
 
     def _publish_diagnostics(self) -> None:
         controller, backend = self._controller, self._backend

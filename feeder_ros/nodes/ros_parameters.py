@@ -70,7 +70,48 @@ def declare_parameters(
             default = float(default)
         parameter = node.declare_parameter(spec.name, default, descriptor_for(spec))
         values[spec.name] = spec.check(parameter.value)
+    _warn_unknown_overrides(node)
+    node.add_on_set_parameters_callback(
+        _fixed_clock(bool(node.get_parameter("use_sim_time").value))
+    )
     return values
+
+
+def _fixed_clock(
+    use_sim_time: bool,
+) -> Callable[[list[Parameter[Any]]], SetParametersResult]:
+    """An on-set-parameters callback refusing a change of ``use_sim_time``: the feeder nodes
+    choose their clock at start-up (timers, watchdogs, the simulator's /clock publisher), and a
+    switch to sim time with no /clock would freeze a drive's watchdog."""
+
+    def callback(parameters: list[Parameter[Any]]) -> SetParametersResult:
+        for parameter in parameters:
+            if parameter.name == "use_sim_time" and parameter.value != use_sim_time:
+                return SetParametersResult(
+                    successful=False,
+                    reason=f"use_sim_time={parameter.value!r}: this node's clock is chosen at "
+                    f"start-up (use_sim_time={use_sim_time}); restart the node to change it",
+                )
+        return SetParametersResult(successful=True)
+
+    return callback
+
+
+def _warn_unknown_overrides(node: Node) -> None:
+    """Name the start-up values (``-p``, params files) for parameters this node does not have:
+    rclpy drops them silently, so a misspelled name would leave the default in force unnoticed."""
+    overrides = getattr(node, "_parameter_overrides", {})  # rclpy keeps them there
+    unknown = sorted(
+        name
+        for name in overrides
+        # QoS overrides are declared later, with the publisher or subscription they configure
+        if not name.startswith("qos_overrides.") and not node.has_parameter(name)
+    )
+    if unknown:
+        node.get_logger().warning(
+            f"ignored: {', '.join(unknown)} given at start-up, but this node has no such "
+            "parameter (misspelled? the README's node tables list the parameters)"
+        )
 
 
 def validator(
@@ -91,7 +132,7 @@ def validator(
             for parameter in parameters:
                 spec = specs.get(parameter.name)
                 if spec is None:
-                    continue  # use_sim_time and other parameters rclpy manages itself
+                    continue  # use_sim_time (see _fixed_clock) and others rclpy manages itself
                 proposed[parameter.name] = spec.check(parameter.value)
             if check_all is not None:
                 check_all(proposed)

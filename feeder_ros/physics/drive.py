@@ -28,6 +28,8 @@ from dataclasses import dataclass, field
 import numpy as np
 import numpy.typing as npt
 
+from feeder_ros.physics.parameters import is_number
+
 __all__ = [
     "DEFAULT_RAMP_STEP_S",
     "MAX_RAMP_STEPS",
@@ -53,7 +55,7 @@ class DriveError(ValueError):
 
 
 def _check(name: str, value: float, allow_zero: bool, at_most: float = math.inf) -> float:
-    if isinstance(value, bool) or not isinstance(value, int | float):
+    if not is_number(value):
         raise DriveError(f"{name}={value!r} is not a number")
     number = float(value)
     if not math.isfinite(number):

@@ -7,31 +7,45 @@ One table, :data:`PARAMETER_SPECS`, is the single source of the public names: th
 from __future__ import annotations
 
 import math
+import numbers
 from collections.abc import Mapping
 from dataclasses import dataclass, fields, replace
-from typing import Any, Final
+from typing import Any, Final, TypeGuard
 
 import numpy as np
 
 __all__ = [
+    "MAX_NATURAL_FREQUENCY_HZ",
     "PARAMETER_SPECS",
     "FeederParameters",
     "ParameterError",
     "ParameterSpec",
     "finite_number",
+    "is_number",
     "parse_parameter_value",
 ]
+
+
+#: the highest natural frequency of the carrier accepted [Hz]: far above any vibratory feeder,
+#: and where the event solver still resolves a period at t = 1e4 s (double precision)
+MAX_NATURAL_FREQUENCY_HZ: Final = 1e6
 
 
 class ParameterError(ValueError):
     """A parameter name or value that the model cannot accept; the message names the value."""
 
 
+def is_number(value: object) -> TypeGuard[float]:
+    """A real number: Python's or NumPy's scalars (np.float32, np.int64, ...), not a bool; it
+    converts and compares like a float."""
+    return isinstance(value, numbers.Real) and not isinstance(value, bool | np.bool_)
+
+
 def finite_number(
     name: str, value: object, *, positive: bool = False, nonnegative: bool = False
 ) -> float:
     """``value`` as a finite float; ParameterError naming ``name`` and the value otherwise."""
-    if isinstance(value, bool) or not isinstance(value, int | float | np.floating | np.integer):
+    if not is_number(value):
         raise ParameterError(f"{name}={value!r} is not a number")
     number = float(value)
     if not math.isfinite(number):
@@ -77,14 +91,15 @@ class ParameterSpec:
                     f"{self.name}={value!r} is not one of {', '.join(self.choices)}"
                 )
             return value
-        if isinstance(value, bool) or not isinstance(value, int | float):
+        if not is_number(value):
             raise ParameterError(f"{self.name}={value!r} is not a number")
+        real = float(value)
         if self.kind is int:
-            if float(value) != int(value):
+            if not math.isfinite(real) or real != int(real):
                 raise ParameterError(f"{self.name}={value!r} is not an integer")
-            number: float | int = int(value)
+            number: float | int = int(real)
         else:
-            number = float(value)
+            number = real
         if math.isnan(number) and self.nan_allowed:
             return number
         if not math.isfinite(number):
@@ -245,6 +260,25 @@ class FeederParameters:
                 f"kinetic_friction={self.kinetic_friction!r} must not exceed "
                 f"static_friction={self.static_friction!r}"
             )
+        for side in ("forward", "backward"):
+            self._check_natural_frequency(side)
+
+    def _check_natural_frequency(self, side: str) -> None:
+        """Each value may be in range while together they give a stiffness that overflows or
+        vanishes (L_f = 1e-60 m: K_f ~ 1e180 N/m): refuse what the solver cannot resolve."""
+        length = getattr(self, f"{side}_length_m")
+        try:
+            frequency = getattr(self, f"{side}_natural_frequency_hz")
+        except (ZeroDivisionError, OverflowError):
+            frequency = math.inf
+        if math.isfinite(frequency) and 0.0 < frequency <= MAX_NATURAL_FREQUENCY_HZ:
+            return
+        raise ParameterError(
+            f"{side}_length_m={length!r} with youngs_modulus_pa={self.youngs_modulus_pa!r}, "
+            f"plate_width_m={self.plate_width_m!r}, plate_thickness_m={self.plate_thickness_m!r}, "
+            f"plate_count={self.plate_count!r} and the masses gives a {side} natural frequency "
+            f"of {frequency:.3g} Hz: it must be > 0 and at most {MAX_NATURAL_FREQUENCY_HZ:g} Hz"
+        )
 
     # -- construction ---------------------------------------------------------------------
     @classmethod

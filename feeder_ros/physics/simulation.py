@@ -835,11 +835,7 @@ class FeederSimulator:
                     )
                 continue
             if status != _k.STATUS_DONE:
-                reason = {
-                    _k.STATUS_RESONANCE: "exact resonance of an undamped branch (c = 0, drive "
-                    "frequency equal to a branch natural frequency): no bounded closed form",
-                    _k.STATUS_STUCK: "an event repeats at one instant without progress",
-                }.get(status, f"status {status}")
+                reason = _status_reason(status)
                 raise SimulationError(f"sharp solver stopped at t={self.time_s!r} s: {reason}")
             break
         if not record:
@@ -1225,6 +1221,16 @@ def simulate_many(
     )
 
 
+def _status_reason(status: int) -> str:
+    """Why the sharp solver stopped, from its status code."""
+    return {
+        _k.STATUS_RESONANCE: "exact resonance of an undamped branch (c = 0, drive frequency "
+        "equal to a branch natural frequency): no bounded closed form",
+        _k.STATUS_STUCK: "an event repeats at one instant without progress",
+        _k.STATUS_BUFFER_FULL: "the event buffer filled",
+    }.get(status, f"status {status}")
+
+
 def _simulate_many_from_rest(
     points: Sequence[FeederParameters | tuple[FeederParameters, DriveSchedule | None]],
     duration_s: float,
@@ -1281,7 +1287,11 @@ def _simulate_many_from_rest(
     )
     bad = np.flatnonzero(results[:, 0] != _k.STATUS_DONE)
     if bad.size:
-        raise SimulationError(f"sharp solver failed at points {bad.tolist()} (status codes)")
+        shown = [f"point {p} ({_status_reason(int(results[p, 0]))})" for p in bad[:3].tolist()]
+        more = f" and {bad.size - 3} more point(s)" if bad.size > 3 else ""
+        raise SimulationError(
+            f"sharp solver failed at {len(bad)} of {P} point(s): {'; '.join(shown)}{more}"
+        )
 
     def summary(values: F64, span_s: float) -> ManySummary:
         exit_t = values[:, 3]

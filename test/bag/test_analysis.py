@@ -5,11 +5,13 @@ from __future__ import annotations
 
 import json
 import math
+import re
 from pathlib import Path
 from typing import Any
 
 import numpy as np
 import pytest
+import yaml
 from diagnostic_msgs.msg import DiagnosticArray, DiagnosticStatus
 from mcap.reader import make_reader
 from rclpy.serialization import serialize_message
@@ -66,10 +68,12 @@ def write_feeder_bag(
     batches: bool = False,
     carrier: bool = True,
     extras: bool = True,
+    split_s: int = 0,
 ) -> None:
     """5 s of a feeder: carrier state (1 kHz), estimate and part states (100 Hz), sensor events,
-    exits, drive commands, diagnostics, plus unrelated topics; all stamped on exact grids."""
-    with BagWriter(path, chunk_size=chunk_size) as w:
+    exits, drive commands, diagnostics, plus unrelated topics; all stamped on exact grids.
+    ``split_s``: a new file every so many seconds of recording (0: one file)."""
+    with BagWriter(path, chunk_size=chunk_size, max_file_duration_ns=split_s * S) as w:
         topics = {
             "state": (f"{ns}/carrier/state", "feeder_ros/msg/CarrierState"),
             "batch": (f"{ns}/carrier/state_batch", "feeder_ros/msg/CarrierStateBatch"),
@@ -391,6 +395,124 @@ def test_corrupt_chunk_is_named_and_the_rest_analysed(tmp_path: Path) -> None:
     assert result.as_dict()["chunks_lost"] == 1
     assert [s.frequency_hz for s in result.segments][:2] == [30.0, 40.0]
     assert result.segments[0].speed_ground_truth_mps == pytest.approx(0.003)
+
+
+@pytest.mark.parametrize("damage", ["missing", "empty", "cut_short", "record", "malformed"])
+def test_lost_split_file_or_records_are_data_lost(tmp_path: Path, damage: str) -> None:
+    """Whatever keeps recorded messages from being read counts as lost data, not only a corrupt
+    chunk: a missing, empty or cut-short split file before the last, a damaged record header, a
+    malformed message. The rest is analysed; counts come out short."""
+    path = tmp_path / "bag"
+    write_feeder_bag(path, chunk_size=8192, extras=False, split_s=1)
+    # five files of the 1 kHz loop, then more: the events and diagnostics written after it
+    assert len(list(path.glob("*.mcap"))) >= 5
+    second = path / "bag_1.mcap"
+    expected = {
+        "missing": "1 missing file(s), about 0.999 s of recording",
+        "empty": "1 file(s) that are not MCAP",
+        "cut_short": "1 split file(s) cut short before the last",
+        "record": "1 damaged record(s) skipped over",
+        "malformed": "1 chunk(s) with malformed messages dropped",
+    }[damage]
+    if damage == "missing":
+        second.unlink()
+    elif damage == "empty":
+        second.write_bytes(b"")
+    elif damage == "cut_short":
+        second.write_bytes(second.read_bytes()[: second.stat().st_size // 2])
+    elif damage == "record":
+        with second.open("rb") as stream:
+            summary = make_reader(stream).get_summary()
+        assert summary is not None
+        offset = sorted(c.chunk_start_offset for c in summary.chunk_indexes)[1]
+        data = bytearray(second.read_bytes())
+        data[offset] = 0x7F  # the record header: the scan resumes at the next chunk
+        second.write_bytes(bytes(data))
+    else:
+        with BagWriter(tmp_path / "extra") as w:  # an exit message cut before its last field
+            w.add_topic("/cell_a/parts/exit", "feeder_ros/msg/PartExit")
+            w.write("/cell_a/parts/exit", cdr(PartExit(part_id=99))[:-4], T0 + 4500 * MS)
+        (tmp_path / "extra" / "extra_0.mcap").rename(path / "bag_99.mcap")
+    result = analyze_bag(path)
+    assert result.ok
+    assert result.data_lost
+    assert result.loss_summary() == expected
+    assert result.as_dict()["data_losses"] == [str(p) for p in result.data_losses]
+    assert all(str(p) in result.problems for p in result.data_losses)
+    write_feeder_bag(tmp_path / "whole", chunk_size=8192, extras=False, split_s=1)
+    whole = analyze_bag(tmp_path / "whole")
+    assert not whole.data_lost
+    if damage != "malformed":  # messages of the second's file are missing
+        assert sum(result.messages.values()) < sum(whole.messages.values())
+    assert "DATA LOST: " + expected in format_summary([result])
+
+
+def test_cut_short_last_file_of_a_split_bag_is_no_loss(tmp_path: Path) -> None:
+    path = tmp_path / "bag"
+    write_feeder_bag(path, chunk_size=8192, extras=False, split_s=1)
+    last = max(path.glob("*.mcap"), key=lambda p: int(p.stem.split("_")[1]))
+    last.write_bytes(last.read_bytes()[: last.stat().st_size // 2])
+    result = analyze_bag(path)
+    assert result.cut_short
+    assert not result.data_lost
+    assert result.data_losses == []
+
+
+def test_diagnostics_not_in_metadata_yaml_are_found(tmp_path: Path) -> None:
+    """A recorder killed before it rewrote metadata.yaml leaves no topics listed there: the
+    diagnostics are found in the data all the same."""
+    write_feeder_bag(tmp_path / "bag")
+    meta = tmp_path / "bag" / "metadata.yaml"
+    data = yaml.safe_load(meta.read_text())
+    data["rosbag2_bagfile_information"]["topics_with_message_count"] = []
+    meta.write_text(yaml.safe_dump(data))
+    check_standard(analyze_bag(tmp_path / "bag"))
+
+
+def test_impossible_values_are_left_out_and_named(tmp_path: Path) -> None:
+    """Values the analysis cannot use are left out with a problem naming one of them, not
+    silently: impossible batch sample periods, non-finite estimates and drive settings, and drive
+    samples stamped before ones already read (one outlying stamp far ahead)."""
+    path = tmp_path / "bag"
+    with BagWriter(path) as w:
+        w.add_topic("/f/carrier/state_batch", "feeder_ros/msg/CarrierStateBatch")
+        w.add_topic("/f/carrier/state", "feeder_ros/msg/CarrierState")
+        w.add_topic("/f/estimate", "feeder_ros/msg/VehicleEstimate")
+        for k, period in enumerate([1e-3, math.nan, 1e6, -1e-3, 1e-3]):
+            batch = CarrierStateBatch(sample_period_s=period)
+            batch.drive_frequency_hz = [30.0] * 10
+            batch.drive_amplitude_n = [20.0] * 9 + [math.inf]
+            w.write("/f/carrier/state_batch", cdr(stamp(batch, T0 + k * 10 * MS)), T0 + k * 10 * MS)
+        for k, speed in enumerate([0.01, math.nan, 0.01]):
+            estimate = VehicleEstimate(mean_speed_mps=speed, slip_fraction=0.5)
+            w.write("/f/estimate", cdr(stamp(estimate, T0 + k * MS)), T0 + k * MS)
+    result = analyze_bag(path)
+    problems = "\n".join(result.problems)
+    for line in (
+        "[bad_value] 3 CarrierStateBatch message(s) with an impossible sample_period_s left out "
+        "(for example nan)",
+        # the two batches read each end with an infinite amplitude
+        "[bad_value] 2 non-finite drive amplitude(s) taken as off (for example inf)",
+        "[bad_value] 1 non-finite VehicleEstimate.mean_speed_mps left out (for example nan)",
+    ):
+        assert line in problems
+    assert "out_of_order" not in problems
+
+    path = tmp_path / "outlier"
+    with BagWriter(path, chunk_size=4096) as w:  # chunks of about 100 messages
+        w.add_topic("/f/carrier/state", "feeder_ros/msg/CarrierState")
+        for k in range(2000):
+            t_ns = T0 + k * MS + (100 * S if k == 500 else 0)  # one stamp 100 s ahead
+            freq = 30.0 if k < 1000 else 40.0
+            state = CarrierState(drive_frequency_hz=freq, drive_amplitude_n=20.0)
+            w.write("/f/carrier/state", cdr(stamp(state, t_ns)), T0 + k * MS)
+    result = analyze_bag(path)
+    (note,) = [p for p in result.problems if p.startswith("[out_of_order]")]
+    # every sample of the chunks after the outlier's: the change to 40 Hz at 1 s is lost
+    match = re.match(r"\[out_of_order\] (\d+) carrier state sample\(s\) stamped before", note)
+    assert match is not None
+    assert 1400 <= int(match[1]) < 1500
+    assert "(up to t = 100.5 s)" in note
 
 
 def test_missing_metadata_yaml(tmp_path: Path) -> None:

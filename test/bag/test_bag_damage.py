@@ -270,6 +270,182 @@ def test_missing_file_listed_in_metadata(tmp_path: Path) -> None:
     assert len(read_x(bag)) == 100
 
 
+def test_relative_file_paths_not_a_list_is_named(tmp_path: Path) -> None:
+    """A string where metadata.yaml needs a list is not read character by character."""
+    path = tmp_path / "bag"
+    write_imu_bag(path, 50)
+    meta = path / "metadata.yaml"
+    data = yaml.safe_load(meta.read_text())
+    data["rosbag2_bagfile_information"]["relative_file_paths"] = "bag_0.mcap"
+    meta.write_text(yaml.safe_dump(data))
+    bag = Bag(path, warn=False)
+    assert kinds(bag) == ["bad_metadata"]
+    assert "relative_file_paths is not a list of file names: 'bag_0.mcap'" in str(bag.problems[0])
+    assert bag.files == [path / "bag_0.mcap"]
+    assert len(read_x(bag)) == 50
+
+
+def split_imu_bag(path: Path) -> None:
+    """150 IMU messages (1 ms apart) in three files of 50, a few chunks each."""
+    with BagWriter(path, chunk_size=4096, max_file_duration_ns=50_000_000) as writer:
+        writer.add_topic("/imu", "sensor_msgs/msg/Imu")
+        for i in range(150):
+            writer.write("/imu", imu(i), T0 + i * 1_000_000)
+    assert sorted(p.name for p in path.glob("*.mcap")) == [f"bag_{i}.mcap" for i in range(3)]
+
+
+def test_lost_data_names_the_losses_but_not_a_cut_last_file(tmp_path: Path) -> None:
+    path = tmp_path / "bag"
+    split_imu_bag(path)
+    last = path / "bag_2.mcap"
+    last.write_bytes(last.read_bytes()[:-100])
+    bag = Bag(path, warn=False)
+    assert len(read_x(bag)) == 150
+    assert kinds(bag) == ["cut_short"]
+    assert bag.lost_data() == []  # a killed recorder: what was read is whole up to the cut
+    middle = path / "bag_1.mcap"
+    middle.write_bytes(middle.read_bytes()[:-100])
+    bag = Bag(path, warn=False)
+    read_x(bag)
+    assert [(p.kind, p.file) for p in bag.lost_data()] == [("cut_short", middle)]
+    middle.write_bytes(b"")
+    bag = Bag(path, warn=False)
+    assert len(read_x(bag)) == 100
+    assert [(p.kind, p.file) for p in bag.lost_data()] == [("not_mcap", middle)]
+    middle.unlink()
+    bag = Bag(path, warn=False)
+    (lost,) = bag.lost_data()
+    assert (lost.kind, lost.file) == ("missing_file", middle)
+    # what the metadata said of the missing file: 50 messages 1 ms apart
+    assert lost.lost_ns == 49_000_000
+
+
+def test_reindex_leaves_damaged_files_as_they_are(tmp_path: Path) -> None:
+    """Only a file that is merely cut short is rewritten; a file that is not MCAP, or damaged
+    before its cut, keeps its bytes (a rewrite would lose what lies past the damage), and a
+    missing split file stays listed in metadata.yaml."""
+    path = tmp_path / "bag"
+    split_imu_bag(path)
+    first, middle, last = (path / f"bag_{i}.mcap" for i in range(3))
+    first.write_bytes(b"overwritten by something else")  # not MCAP
+    data = bytearray(middle.read_bytes())
+    off = chunk_indexes(middle)[1].chunk_start_offset
+    data[off] = 0x7F  # a damaged record header, and no footer: nothing after it can be found
+    middle.write_bytes(bytes(data[: len(data) - 200]))
+    last.write_bytes(last.read_bytes()[: chunk_indexes(last)[-1].chunk_start_offset + 10])
+    before = {p: p.read_bytes() for p in (first, middle)}
+    info = reindex(path)
+    assert {p: p.read_bytes() for p in (first, middle)} == before
+    not_finished = [p for p in info.problems if p.kind == "not_finished"]
+    assert [p.file for p in not_finished] == [first, middle]
+    assert "damaged (not_mcap)" in not_finished[0].detail
+    assert "damaged (corrupt_record)" in not_finished[1].detail
+    with last.open("rb") as f:  # the cut-short last file was finished
+        summary = make_reader(f).get_summary()
+        assert summary is not None
+    # the third file's complete chunks, and the middle file's chunk before the damage, are read
+    x = read_x(Bag(path, warn=False))
+    assert len(x) == info.message_count > 0
+    # a corrupt chunk in a cut-short file: counting reads only the indexes and misses it; the
+    # rewrite's full read finds it, and the file is left as it is
+    path = tmp_path / "chunk" / "bag"
+    split_imu_bag(path)
+    last = path / "bag_2.mcap"
+    data = bytearray(last.read_bytes())
+    index = chunk_indexes(last)[1]
+    at = index.chunk_start_offset + index.chunk_length // 2
+    data[at : at + 64] = bytes(64)
+    last.write_bytes(bytes(data[: chunk_indexes(last)[-1].chunk_start_offset + 10]))
+    before_last = last.read_bytes()
+    info = reindex(path)
+    assert last.read_bytes() == before_last
+    (not_finished,) = [p for p in info.problems if p.kind == "not_finished"]
+    assert not_finished.file == last
+    assert "damaged (corrupt_chunk)" in not_finished.detail
+    # a missing file stays listed, with what the old metadata.yaml said of it
+    path = tmp_path / "other" / "bag"
+    split_imu_bag(path)
+    (path / "bag_1.mcap").unlink()
+    info = reindex(path)
+    meta = yaml.safe_load((path / "metadata.yaml").read_text())["rosbag2_bagfile_information"]
+    assert meta["relative_file_paths"] == ["bag_0.mcap", "bag_1.mcap", "bag_2.mcap"]
+    assert meta["files"][1]["path"] == "bag_1.mcap"
+    assert meta["files"][1]["message_count"] == 50
+    assert meta["files"][1]["starting_time"]["nanoseconds_since_epoch"] == T0 + 50_000_000
+    assert meta["message_count"] == info.message_count == 100  # the messages there
+    assert kinds(Bag(path, warn=False)) == ["missing_file"]
+
+
+def test_reindex_keeps_two_types_on_one_topic_name(tmp_path: Path) -> None:
+    """A cut-short file (another writer's) where one topic name carries two types: the rewrite
+    keeps each message on its own channel and type, and metadata.yaml lists both."""
+    from mcap.writer import Writer as McapWriter
+
+    from feeder_ros.bag import ros2msg_schema
+
+    path = tmp_path / "bag"
+    path.mkdir()
+    mcap = path / "bag_0.mcap"
+    with mcap.open("wb") as stream:
+        writer = McapWriter(stream, chunk_size=2048)
+        writer.start("ros2", "test")
+        ids = {}
+        for type_name in ("sensor_msgs/msg/Imu", "feeder_ros/msg/CarrierState"):
+            schema = writer.register_schema(
+                type_name, "ros2msg", ros2msg_schema(type_name).encode()
+            )
+            ids[type_name] = writer.register_channel("/x", "cdr", schema)
+        for i in range(100):
+            writer.add_message(ids["sensor_msgs/msg/Imu"], T0 + 2 * i, imu(i), T0 + 2 * i)
+            state = bytes(serialize_message(CarrierState(velocity_mps=float(i))))
+            writer.add_message(ids["feeder_ros/msg/CarrierState"], T0 + 2 * i + 1, state, T0)
+        writer.finish()
+    mcap.write_bytes(mcap.read_bytes()[: chunk_indexes(mcap)[-1].chunk_start_offset + 10])
+    info = reindex(path)
+    assert not info.cut_short
+    imu_x = read_x(Bag(path, warn=False))
+    states = concat_batches(read_columns(path, "feeder_ros/msg/CarrierState", ["velocity_mps"]))
+    assert len(imu_x) > 20
+    np.testing.assert_array_equal(imu_x, np.arange(len(imu_x)) * 0.5)
+    np.testing.assert_array_equal(states["velocity_mps"], np.arange(len(states["velocity_mps"])))
+    assert abs(len(imu_x) - len(states["velocity_mps"])) <= 1
+    meta = yaml.safe_load((path / "metadata.yaml").read_text())["rosbag2_bagfile_information"]
+    listed = sorted(
+        (t["topic_metadata"]["name"], t["topic_metadata"]["type"], t["message_count"])
+        for t in meta["topics_with_message_count"]
+    )
+    assert listed == [
+        ("/x", "feeder_ros/msg/CarrierState", len(states["velocity_mps"])),
+        ("/x", "sensor_msgs/msg/Imu", len(imu_x)),
+    ]
+    with mcap.open("rb") as f:  # the summary's counts: every channel, none lost to its name
+        summary = make_reader(f).get_summary()
+    assert summary is not None
+    assert summary.statistics is not None
+    assert sorted(summary.statistics.channel_message_counts.values()) == sorted(
+        [len(imu_x), len(states["velocity_mps"])]
+    )
+
+
+@pytest.mark.parametrize("field", ["acme_msgs/Node[] kids", "acme_msgs/Node next"])
+def test_recursive_schema_is_an_unknown_schema(tmp_path: Path, field: str) -> None:
+    """A schema whose type contains itself is corrupt: named, not a RecursionError."""
+    path = tmp_path / "bag"
+    schema = f"acme_msgs/Node[] children\n{'=' * 80}\nMSG: acme_msgs/Node\n{field}\n"
+    with BagWriter(path) as writer:
+        writer.add_topic("/imu", "sensor_msgs/msg/Imu")
+        writer.add_topic("/tree", "acme_msgs/msg/Tree", schema_text=schema, type_hash="")
+        for i in range(5):
+            writer.write("/imu", imu(i), T0 + i)
+            writer.write("/tree", b"\x00\x01\x00\x00" + struct.pack("<I", 0), T0 + i)
+    bag = Bag(path, warn=False)
+    assert list(read_columns(bag, "acme_msgs/msg/Tree")) == []
+    (problem,) = bag.problems
+    assert problem.kind == "unknown_schema"
+    assert "recursive (acme_msgs/msg/Node -> acme_msgs/msg/Node)" in problem.detail
+    assert len(read_x(bag)) == 5
+
+
 def test_no_bag_at_all(tmp_path: Path) -> None:
     with pytest.raises(MissingBagError, match="no such file"):
         Bag(tmp_path / "nothing")

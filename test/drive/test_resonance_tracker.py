@@ -12,6 +12,7 @@ import pytest
 
 from feeder_ros.drive.limits import DriveLimits
 from feeder_ros.drive.resonance_tracker import (
+    FUTURE_STAMP_TOLERANCE_S,
     ResonanceTracker,
     TrackerCommand,
     TrackerError,
@@ -161,6 +162,26 @@ def test_stale_feedback_holds_the_centre_and_recovers() -> None:
     assert loop.commands[-1][0] > 50.0, "fresh feedback: a new cycle starts"
     loop.run(90.0)
     assert loop.mean_speed(70.0, 90.0) == pytest.approx(0.012, rel=0.03)
+
+
+def test_feedback_stamped_far_ahead_is_ignored_and_the_tracker_holds() -> None:
+    """A reading stamped ahead of the tracker's clock (another clock: wall time against sim
+    time) would count as fresh until the clock reaches it; it is refused, so silence still
+    leads to HOLD after feedback_timeout_s."""
+    loop = Loop(ResonanceTracker(FAST, LIMITS), lorentz_speed(lambda t: 20.0, lambda t: 0.5e-3))
+    loop.start(target=0.012)
+    loop.run(20.0)
+    tracker = loop.tracker
+    assert tracker.feedback(loop.t + 0.5, 0.012)  # within the tolerance: taken
+    assert not tracker.feedback(loop.t + FUTURE_STAMP_TOLERANCE_S + 0.01, 0.012)
+    assert not tracker.feedback(1e9, 0.012)
+    assert not tracker.feedback(loop.t, math.nan)
+    loop.silent = lambda t: True
+    loop.run(23.0)  # no reading since 20.5 s: stale after 2 s
+    status = tracker.status(loop.t)
+    assert status.mode is TrackerMode.HOLD
+    assert "speed feedback stale" in status.reason
+    assert status.feedback_age_s == pytest.approx(loop.t - 20.5, abs=1e-9)
 
 
 def test_limits_bands_and_ramps_are_respected() -> None:

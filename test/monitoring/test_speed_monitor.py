@@ -187,6 +187,21 @@ def test_feed_rate_over_the_window() -> None:
     assert monitor.evaluate(100.0).feed_rate_ppm == pytest.approx(0.0)  # all left the window
 
 
+def test_feed_rate_right_after_a_restart_counts_only_the_new_run() -> None:
+    """The window shrinks to the time since the drive started: exits from before the restart
+    are not divided by those few milliseconds (30,000 parts/min for a moment)."""
+    monitor = SpeedMonitor(MonitorConfig(feed_window_s=60.0))
+    monitor.on_drive(0.0, True, math.nan)
+    for k in range(5):
+        monitor.on_exit(2.0 * (k + 1))
+    monitor.on_drive(10.5, False, math.nan)
+    monitor.on_drive(12.0, True, math.nan)
+    assert monitor.evaluate(12.01).feed_rate_ppm == 0.0
+    monitor.on_exit(13.0)
+    assert monitor.evaluate(14.0).feed_rate_ppm == pytest.approx(60.0 / 2.0)  # 1 part in 2 s
+    assert monitor.evaluate(72.0).feed_rate_ppm == pytest.approx(1.0)  # full window: 1 in 60 s
+
+
 def test_time_jumping_back_restarts_the_windows() -> None:
     monitor = SpeedMonitor()
     monitor.on_drive(100.0, True, TARGET)

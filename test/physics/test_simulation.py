@@ -290,7 +290,10 @@ def test_simulate_many_reports_a_point_the_solver_cannot_run(settle_s: float) ->
     k = good.forward_stiffness_n_per_m * good.cos_theta
     f_n = math.sqrt(k / good.equivalent_mass_kg) / (2.0 * math.pi)
     resonant = good.with_changes(drive_frequency_hz=f_n)
-    with pytest.raises(SimulationError, match=r"points \[1\]"):
+    with pytest.raises(
+        SimulationError,
+        match=r"failed at 1 of 2 point\(s\): point 1 \(exact resonance of an undamped branch",
+    ):
         simulate_many([good, resonant], 1.0, settle_s=settle_s)
 
 
@@ -349,6 +352,41 @@ def test_bad_input_is_refused_with_the_value_named(
     assert callable(call)
     with pytest.raises(ParameterError, match=needle):
         call(case_study)
+
+
+@pytest.mark.parametrize(
+    ("changes", "needle"),
+    [
+        ({"plate_count": math.nan}, "plate_count=nan is not an integer"),
+        ({"plate_count": math.inf}, "plate_count=inf is not an integer"),
+        ({"plate_count": np.float64(2.5)}, r"plate_count=np.float64\(2.5\) is not an integer"),
+        ({"carrier_mass_kg": np.True_}, "carrier_mass_kg=np.True_ is not a number"),
+        # each in range, together a stiffness that overflows (ZeroDivisionError before) or a
+        # natural frequency the solver cannot resolve (a false "exact resonance" before)
+        (
+            {"backward_length_m": 1e-120},
+            "backward_length_m=1e-120 .* backward natural frequency of inf Hz: it must be > 0 "
+            "and at most 1e\\+06 Hz",
+        ),
+        ({"forward_length_m": 1e-60}, "forward natural frequency of 3.68e\\+89 Hz"),
+        ({"plate_thickness_m": 1e-200}, "forward natural frequency of 0 Hz"),
+    ],
+)
+def test_parameters_refused_with_the_value_named(changes: dict[str, object], needle: str) -> None:
+    with pytest.raises(ParameterError, match=needle):
+        FeederParameters(**changes)  # type: ignore[arg-type]
+
+
+def test_numpy_scalars_are_numbers() -> None:
+    """Values read from arrays (np.float32, np.int64) are taken, as Python numbers."""
+    params = FeederParameters(
+        carrier_mass_kg=np.float32(0.5), plate_count=np.int64(2), drive_frequency_hz=np.float64(25)
+    )
+    assert params == FeederParameters(carrier_mass_kg=0.5, plate_count=2, drive_frequency_hz=25.0)
+    assert type(params.plate_count) is int
+    assert type(params.carrier_mass_kg) is float
+    schedule = DriveSchedule(np.float32(30.0), np.int64(2))
+    assert schedule.values_at(0.0) == pytest.approx((30.0, 2.0), rel=1e-15)
 
 
 def test_switching_variable_can_change_mid_run(case_study: FeederParameters) -> None:
