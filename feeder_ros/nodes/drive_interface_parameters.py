@@ -88,7 +88,7 @@ NODE_PARAMETERS = (
         1000.0,
     ),
     ParameterSpec(
-        "diagnostics_period_s", float, "s", "/diagnostics period (read at start)", 0.05, 60.0
+        "diagnostics_period_s", float, "s", "/diagnostics period", 0.05, 60.0, read_only=True
     ),
     ParameterSpec(
         "speed_model_enabled",

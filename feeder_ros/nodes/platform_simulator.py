@@ -14,6 +14,7 @@ By default simulated time follows the wall clock (times ``real_time_factor``); w
 
 from __future__ import annotations
 
+import dataclasses
 import math
 import threading
 import time
@@ -61,7 +62,25 @@ MAX_COMMAND_FREQUENCY_HZ = 1e5
 MAX_COMMAND_AMPLITUDE_N = 1e6
 #: a drive command stamped further ahead of the simulation clock is refused (clocks that differ)
 FUTURE_STAMP_TOLERANCE_S = 1.0
-PARAMETERS = {**PARAMETER_SPECS, **NODE_PARAMETERS}
+#: the model's drive parameters mean something else to the node: its drive comes from
+#: drive/command (the drive interface), never from a parameter. They stay declared, read-only,
+#: so the simulator's YAML (shared with ``feeder sim``, whose drive they are) loads without a
+#: warning, and a `ros2 param set` is refused with the reason instead of doing nothing.
+NODE_DRIVE_SPECS = {
+    "drive_frequency_hz": dataclasses.replace(
+        PARAMETER_SPECS["drive_frequency_hz"],
+        read_only=True,
+        description="drive frequency reported before the first drive/command; the node is "
+        "driven only by drive/command (`feeder sim`: the drive frequency f_d)",
+    ),
+    "drive_amplitude_n": dataclasses.replace(
+        PARAMETER_SPECS["drive_amplitude_n"],
+        read_only=True,
+        description="not used by the node, which starts at rest and is driven only by "
+        "drive/command (`feeder sim`: the drive amplitude A)",
+    ),
+}
+PARAMETERS = {**PARAMETER_SPECS, **NODE_DRIVE_SPECS, **NODE_PARAMETERS}
 
 # sensor data: best effort and volatile like qos_profile_sensor_data, but with a history deep
 # enough for a tick's burst (at 1 kHz and 10 ms ticks, 10 samples leave at once): with

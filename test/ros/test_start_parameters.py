@@ -72,3 +72,56 @@ def test_unknown_start_up_parameters_are_named(
         "parameter" in err
     )
     assert err.count("ignored:") == 1
+
+
+def test_simulator_drive_parameters_are_read_only(capfd: pytest.CaptureFixture[str]) -> None:
+    """The simulator is driven by drive/command only: its drive parameters (kept so the YAML it
+    shares with `feeder sim` loads) are taken at start-up without a warning, and a later change
+    is refused instead of being accepted and doing nothing."""
+    from feeder_ros.nodes.platform_simulator import PlatformSimulator
+
+    context = rclpy.Context()
+    rclpy.init(context=context)
+    try:
+        overrides = [
+            Parameter("drive_amplitude_n", value=40.0),
+            Parameter("drive_frequency_hz", value=25.0),
+        ]
+        node = PlatformSimulator(context=context, parameter_overrides=overrides)
+        try:
+            for name, value in (("drive_amplitude_n", 10.0), ("drive_frequency_hz", 30.0)):
+                [result] = node.set_parameters([Parameter(name, value=value)])
+                assert not result.successful
+                assert name in result.reason
+                assert "read-only" in result.reason
+                descriptor = node.describe_parameter(name)
+                assert descriptor.read_only
+                assert "drive/command" in descriptor.description
+            assert node.get_parameter("drive_amplitude_n").value == 40.0
+            assert node._drive == (25.0, 0.0)  # at rest until a drive command
+        finally:
+            node.destroy_node()
+    finally:
+        rclpy.shutdown(context=context)
+    assert "ignored:" not in capfd.readouterr().err
+
+
+def test_drive_interface_diagnostics_period_is_read_only() -> None:
+    """Its /diagnostics timer is made once: a later change is refused, not taken and ignored."""
+    from feeder_ros.nodes.drive_interface import DriveInterface
+
+    context = rclpy.Context()
+    rclpy.init(context=context)
+    try:
+        overrides = [Parameter("diagnostics_period_s", value=0.5)]
+        node = DriveInterface(context=context, parameter_overrides=overrides)
+        try:
+            [result] = node.set_parameters([Parameter("diagnostics_period_s", value=2.0)])
+            assert not result.successful
+            assert "diagnostics_period_s" in result.reason
+            assert "read-only" in result.reason
+            assert node.get_parameter("diagnostics_period_s").value == 0.5
+        finally:
+            node.destroy_node()
+    finally:
+        rclpy.shutdown(context=context)
