@@ -16,7 +16,7 @@ from __future__ import annotations
 import os
 import re
 import warnings
-from collections.abc import Collection, Iterable, Iterator, Mapping
+from collections.abc import Collection, Iterable, Iterator, Mapping, Sequence
 from dataclasses import dataclass, field
 from pathlib import Path
 from typing import Any
@@ -46,6 +46,7 @@ __all__ = [
     "TopicInfo",
     "bag_info",
     "concat_batches",
+    "data_lost",
     "iter_messages",
     "read_columns",
     "read_tables",
@@ -162,12 +163,7 @@ class Bag:
         ``DATA_LOSS_KINDS``), and a file cut short that is not the bag's last: a killed recorder
         cuts only its last file short, so an earlier one lost its end while the recording went
         on."""
-        last = self.files[-1] if self.files else None
-        return [
-            p
-            for p in self.problems
-            if p.kind in DATA_LOSS_KINDS or (p.kind == "cut_short" and p.file != last)
-        ]
+        return data_lost(self.problems, self.files)
 
     def report(self, problem: BagProblem) -> None:
         self.problems.append(problem)
@@ -405,6 +401,17 @@ def iter_messages(
                 yield RawMessage(channel.topic, channel.type, log, pub, data, channel, bag)
 
 
+def data_lost(problems: Sequence[BagProblem], files: Sequence[Path]) -> list[BagProblem]:
+    """The ``problems`` that mean recorded messages could not be read (``DATA_LOSS_KINDS``), and
+    a file cut short that is not the last of ``files`` (a killed recorder cuts only its last)."""
+    last = files[-1] if files else None
+    return [
+        p
+        for p in problems
+        if p.kind in DATA_LOSS_KINDS or (p.kind == "cut_short" and p.file != last)
+    ]
+
+
 @dataclass
 class TopicInfo:
     name: str
@@ -435,6 +442,10 @@ class BagInfo:
 
     def types(self) -> dict[str, str]:
         return {t.name: t.type for t in self.topics.values()}
+
+    def lost_data(self) -> list[BagProblem]:
+        """The problems that lost recorded messages (see :func:`data_lost`)."""
+        return data_lost(self.problems, self.files)
 
 
 def bag_info(bag: Bag | str | os.PathLike[str], *, verify: bool = False) -> BagInfo:

@@ -30,6 +30,8 @@ SUBCOMMANDS: dict[str, str] = {
     "cell": "feeder_ros.cli.cell",
     "record": "feeder_ros.cli.record",
     "analyze": "feeder_ros.cli.analyze",
+    "info": "feeder_ros.cli.info",
+    "reindex": "feeder_ros.cli.reindex",
     "identify": "feeder_ros.cli.identify",
     "design": "feeder_ros.cli.design",
 }
