@@ -246,6 +246,30 @@ def test_bag_source_reports_the_bag_problems(
     assert f"feeder identify: {bag}: problem: [cut_short] {mcap}" in captured.err
 
 
+def test_bag_source_with_lost_data_writes_its_results_and_exits_1(
+    tmp_path: Path, capsys: pytest.CaptureFixture[str]
+) -> None:
+    """A split file of a sweep bag lost (listed in metadata.yaml, gone): the points come from
+    what could be read, the outputs are written, and the exit status says data was lost (like
+    feeder analyze)."""
+    import yaml
+
+    bag = tmp_path / "recorded"
+    write_sweep_bag(bag)
+    meta_path = bag / "metadata.yaml"
+    meta = yaml.safe_load(meta_path.read_text())
+    meta["rosbag2_bagfile_information"]["relative_file_paths"].append("recorded_1.mcap")
+    meta_path.write_text(yaml.safe_dump(meta))
+    out = tmp_path / "out"
+    args = ["--source", "bag", str(bag), "--masses", "0.031", "--window", "1.5", "--no-fit"]
+    assert main(["identify", *args, "--output", str(out)]) == 1
+    captured = capsys.readouterr()
+    assert f"feeder identify: {bag}: warning: data lost (" in captured.err
+    assert "feeder identify: data lost in 1 bag(s)" in captured.err
+    assert "bag segments:" in captured.out
+    assert (out / "sweep.csv").read_text().count("\n") > 1  # header and measured points
+
+
 def test_an_order_the_hold_out_cannot_score_is_left_out_not_the_whole_curve() -> None:
     """5 frequencies: order 0/1 can be scored on held-out pairs, 0/2 needs 6 (runs of 2 held out
     per fold): 0/2 is left out with the reason and the curve is still fitted."""

@@ -53,9 +53,14 @@ from feeder_ros.yaml_files import YamlFileError, read_yaml
 if TYPE_CHECKING:
     from feeder_ros.bag.analysis import BagAnalysis
 
-__all__ = ["HELP", "PLAN_NAME", "add_arguments", "default_plan_path", "run"]
+__all__ = ["EPILOG", "HELP", "PLAN_NAME", "add_arguments", "default_plan_path", "run"]
 
 HELP = "sweep the drive frequency (sim, live cell or bags) and fit a transfer function G(s)"
+EPILOG = (
+    "exit status: 0 done; 1 --source bag and some bag lost recorded data (corrupt chunks, "
+    "missing split files, ...): its points come from what could be read, and every output is "
+    "written all the same; 2 bad input, or no usable point or model"
+)
 PLAN_NAME = "identify.yaml"
 SOURCES = ("sim", "live", "bag", "csv")
 MEASURES = ("sensors", "monitor", "truth")
@@ -309,7 +314,8 @@ def _note(text: str, bar: ProgressBar) -> None:
     print(f"feeder identify: {text}", file=sys.stderr)
 
 
-def _sweep_bag(args: argparse.Namespace, plan: SweepPlan, show: bool) -> SweepResult:
+def _sweep_bag(args: argparse.Namespace, plan: SweepPlan, show: bool) -> tuple[SweepResult, int]:
+    """The sweep measured in the bags, and how many of them lost recorded data."""
     from feeder_ros.bag.errors import BagError
     from feeder_ros.identification.bag_sweep import sweep_from_bags
 
@@ -350,7 +356,7 @@ def _sweep_bag(args: argparse.Namespace, plan: SweepPlan, show: bool) -> SweepRe
     print(f"bag segments: {len(swept.result)} driven ({sources})")
     for analysis in swept.analyses:
         _report_bag_problems(analysis)
-    return swept.result
+    return swept.result, sum(1 for a in swept.analyses if a.data_lost)
 
 
 #: problems listed per bag on stderr (the rest are counted)
@@ -412,12 +418,13 @@ def run(args: argparse.Namespace) -> int:
     show = bool(args.progress) or sys.stderr.isatty()
     started = time.perf_counter()
     plant: dict[str, Any] | None = None
+    lost_bags = 0  # bags that lost recorded data (their points measured on what was read)
     if args.source == "sim":
         result, plant = _sweep_sim(args, plan, show)
     elif args.source == "live":
         result = _sweep_live(args, plan, show)
     elif args.source == "bag":
-        result = _sweep_bag(args, plan, show)
+        result, lost_bags = _sweep_bag(args, plan, show)
     else:
         result = _sweep_csv(args)
         plan = None  # the CSV's points are what was measured; the plan file does not apply
@@ -448,4 +455,11 @@ def run(args: argparse.Namespace) -> int:
     if args.model_out is not None:
         count = write_model_file(args.model_out, result, fits)
         print(f"wrote the speed model ({count} entries) to {args.model_out}")
+    if lost_bags:
+        print(
+            f"feeder identify: data lost in {lost_bags} bag(s) (see above): the sweep and its "
+            "fit come from what could be read",
+            file=sys.stderr,
+        )
+        return 1
     return 0
