@@ -31,6 +31,15 @@ def write_bag(path: Path, n: int, **options: int) -> None:
                 writer.write("/slow", bytes(serialize_message(Float64(data=-i))), T0 + i * 10**6)
 
 
+def three_file_bag(tmp_path: Path) -> tuple[Path, list[Path]]:
+    """:func:`write_bag` of 300 messages split into three files of 100 ms each."""
+    bag = tmp_path / "bag"
+    write_bag(bag, 300, max_file_duration_ns=100 * 10**6)
+    files = sorted(bag.glob("*.mcap"))
+    assert len(files) == 3
+    return bag, files
+
+
 def test_info_counts_a_whole_bag(tmp_path: Path, capsys: pytest.CaptureFixture[str]) -> None:
     bag = tmp_path / "bag"
     write_bag(bag, 300)
@@ -60,10 +69,7 @@ def test_info_counts_a_whole_bag(tmp_path: Path, capsys: pytest.CaptureFixture[s
 def test_info_names_lost_data_and_refuses_a_non_bag(
     tmp_path: Path, capsys: pytest.CaptureFixture[str]
 ) -> None:
-    bag = tmp_path / "bag"
-    write_bag(bag, 300, max_file_duration_ns=100 * 10**6)
-    files = sorted(bag.glob("*.mcap"))
-    assert len(files) == 3
+    bag, files = three_file_bag(tmp_path)
     files[1].unlink()  # a split file lost: its 100 ms of recording are gone
     assert main(["info", str(bag), "--json"]) == 1
     data = json.loads(capsys.readouterr().out)
@@ -123,9 +129,7 @@ def test_reindex_repairs_a_cut_short_bag(
 def test_reindex_leaves_a_damaged_file_and_says_so(
     tmp_path: Path, capsys: pytest.CaptureFixture[str]
 ) -> None:
-    bag = tmp_path / "bag"
-    write_bag(bag, 300, max_file_duration_ns=100 * 10**6)
-    files = sorted(bag.glob("*.mcap"))
+    bag, files = three_file_bag(tmp_path)
     files[1].write_bytes(b"not an mcap file at all")
     before = {p.name: p.read_bytes() for p in files}
     assert main(["reindex", str(bag)]) == 1
