@@ -82,7 +82,7 @@ def test_info_names_lost_data_and_refuses_a_non_bag(
     assert f"[missing_file] {files[1]}" in text
     missing = tmp_path / "nothing"
     assert main(["info", str(missing)]) == 2
-    assert str(missing) in capsys.readouterr().err
+    assert f"feeder info: error: no bag at {missing}" in capsys.readouterr().err
     text_file = tmp_path / "notes.mcap"
     text_file.write_text("not a recording\n")
     assert main(["info", str(text_file)]) == 2
@@ -136,5 +136,8 @@ def test_reindex_leaves_a_damaged_file_and_says_so(
     text = capsys.readouterr().out
     assert "DATA LOST" in text
     assert {p.name: p.read_bytes() for p in files} == before  # nothing rewritten
-    assert main(["reindex", str(tmp_path / "none")]) == 2
-    assert "not a bag directory" in capsys.readouterr().err
+    none = tmp_path / "none"
+    assert main(["reindex", str(none)]) == 2
+    assert f"no bag at {none}: reindex needs a bag directory" in capsys.readouterr().err
+    assert main(["reindex", str(files[0])]) == 2  # a file, not a directory
+    assert f"no bag at {files[0]}: reindex needs a bag directory" in capsys.readouterr().err

@@ -35,12 +35,14 @@ def add_arguments(parser: argparse.ArgumentParser) -> None:
 
 
 def run(args: argparse.Namespace) -> int:
-    from feeder_ros.bag import BagError, bag_info
+    from feeder_ros.bag import BagError, MissingBagError, bag_info
     from feeder_ros.bag.info_text import describe_info, info_as_dict
     from feeder_ros.bag.reader import Bag
 
     try:
         info = bag_info(Bag(args.bag, warn=False), verify=args.verify)
+    except MissingBagError:
+        raise  # names the path already (an OSError: exit 2)
     except (BagError, OSError) as error:
         raise CommandError(f"{args.bag}: {error}") from None
     if args.bag.is_file() and any(p.kind == "not_mcap" for p in info.problems):

@@ -41,13 +41,13 @@ def add_arguments(parser: argparse.ArgumentParser) -> None:
 
 
 def run(args: argparse.Namespace) -> int:
-    from feeder_ros.bag import BagError, reindex
+    from feeder_ros.bag import BagError, MissingBagError, reindex
     from feeder_ros.bag.info_text import describe_info
 
-    if not args.bag.is_dir():
-        raise CommandError(f"{args.bag}: not a bag directory (reindex works on a directory)")
     try:
         info = reindex(args.bag, finish_files=not args.metadata_only, compression=args.compression)
+    except MissingBagError:
+        raise  # names the path already (an OSError: exit 2)
     except BagError as error:
         raise CommandError(f"{args.bag}: {error}") from None
     print(describe_info(info))
