@@ -23,6 +23,7 @@ is reported in ``/diagnostics`` (WARN) and ``drive/state`` (``status`` = TRACKIN
 from __future__ import annotations
 
 import math
+import os
 from pathlib import Path
 from typing import Any
 
@@ -70,9 +71,13 @@ from feeder_ros.nodes.drive_interface_parameters import (
 )
 from feeder_ros.nodes.ros_parameters import declare_parameters, validator
 from feeder_ros.nodes.runner import run_node
+from feeder_ros.physics.simulation import limited_threads
 from feeder_ros.srv import SetDrive, SetTargetSpeed
 
 RELIABLE = QoSProfile(depth=10, reliability=ReliabilityPolicy.RELIABLE)
+#: threads a speed table not yet cached is simulated on at configure: one core is left to the
+#: nodes of the cell (the simulator and estimator must keep their sample rate meanwhile)
+SPEED_TABLE_THREADS = max(1, (os.cpu_count() or 1) - 1)
 
 INTERFACE = NodeInterface(
     executable="drive_interface",
@@ -331,15 +336,18 @@ class DriveInterface(LifecycleNode):
         if values["speed_model_file"]:
             return self._identified_speed_model(Path(values["speed_model_file"]), values, limits)
         cache = values["speed_model_cache_dir"]
-        model, path, loaded = cached_speed_table(
-            plant_from(values),
-            limits,
-            Path(cache).expanduser() if cache else default_cache_dir(),
-            values["speed_model_frequency_steps"],
-            values["speed_model_amplitude_steps"],
-            values["speed_model_duration_s"],
-            on_store_error=self._speed_table_not_cached,
-        )
+        # a table not yet cached is simulated here, in the configure transition: leave a core to
+        # the live nodes beside this one (a 2-core machine starved the simulator and estimator)
+        with limited_threads(SPEED_TABLE_THREADS):
+            model, path, loaded = cached_speed_table(
+                plant_from(values),
+                limits,
+                Path(cache).expanduser() if cache else default_cache_dir(),
+                values["speed_model_frequency_steps"],
+                values["speed_model_amplitude_steps"],
+                values["speed_model_duration_s"],
+                on_store_error=self._speed_table_not_cached,
+            )
         low, high = model.reachable_range()
         self._speed_source = (
             f"{'loaded' if loaded else 'computed'} table {path.name}, {low:.4g}..{high:.4g} m/s"

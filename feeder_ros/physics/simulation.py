@@ -72,6 +72,7 @@ __all__ = [
     "Phase",
     "SimulationError",
     "SimulationResult",
+    "limited_threads",
     "simulate",
     "simulate_carrier",
     "simulate_many",
@@ -940,16 +941,27 @@ class FeederSimulator:
 
 
 @contextlib.contextmanager
-def _one_thread_if(serial: bool) -> Iterator[None]:
-    """numba's parallel kernels on one thread inside the block if ``serial`` (a small group pass:
-    see ``SMALL_PARALLEL_WORK``); the thread count is restored after it."""
+def limited_threads(count: int) -> Iterator[None]:
+    """numba's parallel kernels (the group passes, :func:`simulate_many`) on at most ``count``
+    threads inside the block; the thread count is restored after it.
+
+    For a caller that shares the machine with live work: a node computing a table at configure
+    leaves a core to the nodes beside it. ``count`` above the current count changes nothing.
+    """
+    if isinstance(count, bool) or not isinstance(count, int) or count < 1:
+        raise ValueError(f"thread count must be an integer of at least 1, got {count!r}")
     threads = numba.get_num_threads()
-    if serial:
-        numba.set_num_threads(1)
+    numba.set_num_threads(min(count, threads))
     try:
         yield
     finally:
         numba.set_num_threads(threads)
+
+
+def _one_thread_if(serial: bool) -> contextlib.AbstractContextManager[None]:
+    """numba's parallel kernels on one thread inside the block if ``serial`` (a small group pass:
+    see ``SMALL_PARALLEL_WORK``)."""
+    return limited_threads(1) if serial else contextlib.nullcontext()
 
 
 def _pass_events_in_time_order(serial: bool, *arrays: npt.NDArray[Any]) -> EventArrays:

@@ -3,7 +3,9 @@
 from __future__ import annotations
 
 import math
+import re
 
+import numba
 import numpy as np
 import pytest
 
@@ -16,6 +18,7 @@ from feeder_ros.physics.simulation import (
     Phase,
     SimulationError,
     _output_arrays,
+    limited_threads,
     simulate,
     simulate_carrier,
     simulate_many,
@@ -255,6 +258,33 @@ def test_simulate_many_agrees_with_single_runs() -> None:
         )
         assert summary.slip_fraction[j] == pytest.approx(run.slip_fraction()[0], abs=1e-12)
     assert summary.slip_fraction[2] == 0.0
+
+
+def test_limited_threads_caps_the_batch_and_restores_the_count() -> None:
+    """A caller sharing the machine (the drive interface at configure) runs a batch on fewer
+    threads: the same numbers, and the thread count as it was afterwards, error or not."""
+    points = [
+        FeederParameters(drive_amplitude_n=a, drive_frequency_hz=f, damping_ns_per_m=10.0)
+        for a, f in [(40.0, 29.6), (20.0, 45.0), (30.0, 33.0)]
+    ]
+    before = numba.get_num_threads()
+    full = simulate_many(points, 1.0)
+    with limited_threads(1):
+        assert numba.get_num_threads() == 1
+        one = simulate_many(points, 1.0)
+    assert numba.get_num_threads() == before
+    np.testing.assert_array_equal(one.mean_part_speed_mps, full.mean_part_speed_mps)
+    np.testing.assert_array_equal(one.slip_fraction, full.slip_fraction)
+    with limited_threads(before + 5):
+        assert numba.get_num_threads() == before  # a cap above the count changes nothing
+    with pytest.raises(RuntimeError), limited_threads(1):
+        raise RuntimeError("the block failed")
+    assert numba.get_num_threads() == before
+    for bad in (0, -1, 1.5, True, "2"):
+        expected = re.escape(f"thread count must be an integer of at least 1, got {bad!r}")
+        with pytest.raises(ValueError, match=expected), limited_threads(bad):  # type: ignore[arg-type]
+            pass
+    assert numba.get_num_threads() == before
 
 
 def test_simulate_many_measures_a_window_after_settling() -> None:
