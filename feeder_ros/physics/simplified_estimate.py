@@ -35,7 +35,7 @@ from dataclasses import dataclass
 import numpy as np
 from numpy.typing import NDArray
 
-from feeder_ros.physics.parameters import FeederParameters
+from feeder_ros.physics.parameters import FeederParameters, ParameterError, finite_number
 
 __all__ = [
     "SimplifiedEstimate",
@@ -46,6 +46,33 @@ __all__ = [
 ]
 
 FloatArray = NDArray[np.float64]
+
+
+def _samples(**named: FloatArray) -> tuple[FloatArray, ...]:
+    """The named sample arrays as 1-D float64 arrays of one length; ParameterError naming the
+    array and the first bad sample otherwise (a NaN would turn every estimate into noise)."""
+    arrays = tuple(np.asarray(arr, dtype=np.float64) for arr in named.values())
+    shapes = {name: arr.shape for name, arr in zip(named, arrays, strict=True)}
+    if any(arr.ndim != 1 for arr in arrays) or len(set(shapes.values())) != 1:
+        described = ", ".join(f"{name} {shape}" for name, shape in shapes.items())
+        raise ParameterError(f"sample arrays must be 1-D of one length, got {described}")
+    for name, arr in zip(named, arrays, strict=True):
+        bad = np.flatnonzero(~np.isfinite(arr))
+        if bad.size:
+            raise ParameterError(
+                f"{name}[{bad[0]}]={float(arr[bad[0]])!r} is not finite ({bad.size} such sample(s))"
+            )
+    return arrays
+
+
+def _ascending(t: FloatArray) -> None:
+    back = np.flatnonzero(np.diff(t) <= 0.0)
+    if back.size:
+        k = int(back[0])
+        raise ParameterError(
+            f"sample times must be strictly ascending: t[{k + 1}]={float(t[k + 1])!r} after "
+            f"t[{k}]={float(t[k])!r}"
+        )
 
 
 def _hermite(
@@ -72,7 +99,8 @@ def carrier_velocity_roots(
     interpolant of ``x`` (derivative ``v``). Samples with ``v == 0`` exactly count as roots too (the
     start from rest does not: it is ``t_0``).
     """
-    t, x, v, a = (np.asarray(arr, dtype=np.float64) for arr in (t, x, v, a))
+    t, x, v, a = _samples(t=t, x=x, v=v, a=a)
+    _ascending(t)
     sign = np.sign(v)
     # carry the last non-zero sign over exact zeros so that a touch-and-return is not a root
     nonzero = np.flatnonzero(sign != 0)
@@ -135,12 +163,18 @@ def simplified_estimate(
 ) -> SimplifiedEstimate:
     """Eq. 18 for a sampled carrier trajectory (``t`` ascending; ``x``, ``v``, ``a`` SI).
 
-    ``kinetic_friction`` defaults to ``params.kinetic_friction``.
+    ``kinetic_friction`` defaults to ``params.kinetic_friction``. Non-finite samples, times not
+    strictly ascending, arrays of different lengths and a negative or non-finite friction raise
+    :class:`~feeder_ros.physics.parameters.ParameterError` (a ValueError) naming the value.
     """
-    t, x, v, a = (np.asarray(arr, dtype=np.float64) for arr in (t, x, v, a))
-    if t.ndim != 1 or t.size < 2 or not (x.shape == v.shape == a.shape == t.shape):
-        raise ValueError("t, x, v and a must be 1-D arrays of equal length >= 2")
-    mu_d = params.kinetic_friction if kinetic_friction is None else kinetic_friction
+    t, x, v, a = _samples(t=t, x=x, v=v, a=a)
+    if t.size < 2:
+        raise ParameterError(f"at least 2 samples are needed, got {t.size}")
+    mu_d = (
+        params.kinetic_friction
+        if kinetic_friction is None
+        else finite_number("kinetic_friction", kinetic_friction, nonnegative=True)
+    )
     slip_acc = mu_d * params.gravity_mps2 * params.friction_multiplier
     roots, x_roots = carrier_velocity_roots(t, x, v, a)
     bounds_t = np.concatenate([[t[0]], roots, [t[-1]]])
@@ -191,10 +225,15 @@ class StickSlipConditions:
 def stick_slip_conditions(
     params: FeederParameters, v: FloatArray, a: FloatArray, static_friction: float | None = None
 ) -> StickSlipConditions:
-    """Set S for sampled carrier velocity ``v`` and acceleration ``a``."""
-    v = np.asarray(v, dtype=np.float64)
-    a = np.abs(np.asarray(a, dtype=np.float64))
-    mu_s = params.static_friction if static_friction is None else static_friction
+    """Set S for sampled carrier velocity ``v`` and acceleration ``a`` (non-finite samples and a
+    negative or non-finite friction raise ParameterError naming the value)."""
+    v, a = _samples(v=v, a=a)
+    a = np.abs(a)
+    mu_s = (
+        params.static_friction
+        if static_friction is None
+        else finite_number("static_friction", static_friction, nonnegative=True)
+    )
     limit = mu_s * params.gravity_mps2 * params.friction_multiplier
     forward = a[v > 0]
     backward = a[v < 0]

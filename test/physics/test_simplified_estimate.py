@@ -2,6 +2,8 @@
 
 from __future__ import annotations
 
+import re
+
 import numpy as np
 import pytest
 
@@ -143,3 +145,54 @@ def test_set_s_margins() -> None:
         ).forward_margin_mps2
         > 0.0
     )
+
+
+def _sine_carrier(n: int = 101) -> tuple[np.ndarray, np.ndarray, np.ndarray, np.ndarray]:
+    t = np.linspace(0.0, 1.0, n)
+    w = 2 * np.pi * 3.0
+    return t, 1e-3 * np.sin(w * t), 1e-3 * w * np.cos(w * t), -1e-3 * w * w * np.sin(w * t)
+
+
+@pytest.mark.parametrize("name", ["t", "x", "v", "a"])
+@pytest.mark.parametrize("bad", [np.nan, np.inf, -np.inf])
+def test_non_finite_samples_are_refused_by_name(name: str, bad: float) -> None:
+    """A NaN sample would turn the roots and the travel into noise without a word."""
+    arrays = dict(zip("txva", _sine_carrier(), strict=True))
+    arrays[name][7] = bad
+    arrays[name][9] = bad
+    message = rf"^{name}\[7\]={bad!r} is not finite \(2 such sample\(s\)\)$"
+    with pytest.raises(ValueError, match=message):
+        simplified_estimate(FeederParameters(), arrays["t"], arrays["x"], arrays["v"], arrays["a"])
+    with pytest.raises(ValueError, match=message):
+        carrier_velocity_roots(arrays["t"], arrays["x"], arrays["v"], arrays["a"])
+    if name in "va":
+        with pytest.raises(ValueError, match=message):
+            stick_slip_conditions(FeederParameters(), arrays["v"], arrays["a"])
+
+
+def test_sample_times_out_of_order_or_shapes_that_differ_are_refused() -> None:
+    t, x, v, a = _sine_carrier()
+    t[40] = t[39]
+    expected = f"strictly ascending: t[40]={float(t[39])!r} after t[39]={float(t[39])!r}"
+    with pytest.raises(ValueError, match=re.escape(expected) + "$"):
+        simplified_estimate(FeederParameters(), t, x, v, a)
+    t, x, v, a = _sine_carrier()
+    with pytest.raises(ValueError, match=r"1-D of one length, got t \(101,\), x \(100,\)"):
+        carrier_velocity_roots(t, x[:-1], v, a)
+    with pytest.raises(ValueError, match=r"got v \(101,\), a \(1, 101\)$"):
+        stick_slip_conditions(FeederParameters(), v, a[None, :])
+    with pytest.raises(ValueError, match="at least 2 samples are needed, got 1"):
+        simplified_estimate(FeederParameters(), t[:1], x[:1], v[:1], a[:1])
+
+
+@pytest.mark.parametrize("friction", [np.nan, -0.1, np.inf])
+def test_friction_overrides_are_checked(friction: float) -> None:
+    t, x, v, a = _sine_carrier()
+    with pytest.raises(ValueError, match=rf"^kinetic_friction={friction!r} "):
+        simplified_estimate(FeederParameters(), t, x, v, a, kinetic_friction=friction)
+    with pytest.raises(ValueError, match=rf"^static_friction={friction!r} "):
+        stick_slip_conditions(FeederParameters(), v, a, static_friction=friction)
+    # the same call with a valid override works, and the override is used
+    low = stick_slip_conditions(FeederParameters(), v, a, static_friction=0.1)
+    high = stick_slip_conditions(FeederParameters(), v, a, static_friction=0.2)
+    assert high.stick_limit_mps2 == pytest.approx(2.0 * low.stick_limit_mps2, rel=1e-15)
