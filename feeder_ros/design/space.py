@@ -27,7 +27,12 @@ import numpy as np
 import numpy.typing as npt
 
 from feeder_ros.design.stick_slip_conditions import ConditionLimits, EvaluationWindow
-from feeder_ros.physics.parameters import PARAMETER_SPECS, FeederParameters, ParameterError
+from feeder_ros.physics.parameters import (
+    PARAMETER_SPECS,
+    FeederParameters,
+    ParameterError,
+    is_number,
+)
 from feeder_ros.yaml_files import YamlFileError, read_yaml
 
 __all__ = [
@@ -59,7 +64,7 @@ class DesignError(ParameterError):
 
 
 def _bound(key: str, which: str, value: object, integer: bool) -> float:
-    if isinstance(value, bool) or not isinstance(value, int | float):
+    if not is_number(value):
         raise DesignError(f"{key}: {which} bound {value!r} is not a number")
     number = float(value)
     if not math.isfinite(number):

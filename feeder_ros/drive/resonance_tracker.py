@@ -50,6 +50,7 @@ import math
 from dataclasses import dataclass, fields
 
 from feeder_ros.drive.limits import DriveLimits
+from feeder_ros.physics.parameters import is_number
 
 __all__ = [
     "ResonanceTracker",
@@ -99,7 +100,7 @@ class TrackerSettings:
     def __post_init__(self) -> None:
         for item in fields(self):
             value = getattr(self, item.name)
-            if isinstance(value, bool) or not isinstance(value, int | float):
+            if not is_number(value):
                 raise TrackerError(f"{item.name}={value!r} is not a number")
             if not math.isfinite(value):
                 raise TrackerError(f"{item.name}={value!r} is not finite")

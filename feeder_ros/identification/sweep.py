@@ -30,6 +30,7 @@ import numpy as np
 import numpy.typing as npt
 
 from feeder_ros.csv_cells import csv_cell
+from feeder_ros.physics.parameters import is_number
 
 __all__ = [
     "CSV_COLUMNS",
@@ -100,9 +101,9 @@ def parse_values(name: str, spec: object) -> tuple[float, ...]:
     """Values from a number, a list of numbers, or a string of comma-separated numbers and
     ``start:stop:step`` ranges (stop included when it lies on the grid)."""
     items: list[object]
-    if isinstance(spec, bool):
+    if isinstance(spec, bool | np.bool_):
         raise SweepPlanError(name, spec, "not a number")
-    if isinstance(spec, int | float):
+    if is_number(spec):
         items = [spec]
     elif isinstance(spec, str):
         items = [p.strip() for p in spec.split(",")]
@@ -114,9 +115,9 @@ def parse_values(name: str, spec: object) -> tuple[float, ...]:
         raise SweepPlanError(name, spec, "expected a number, a list or a range like 38:58:0.5")
     values: list[float] = []
     for item in items:
-        if isinstance(item, bool):
+        if isinstance(item, bool | np.bool_):
             raise SweepPlanError(name, item, "not a number")
-        if isinstance(item, int | float):
+        if is_number(item):
             if not math.isfinite(float(item)):
                 raise SweepPlanError(name, item, "not finite")
             values.append(float(item))
@@ -180,7 +181,7 @@ def parse_orders(spec: object) -> tuple[tuple[int, int], ...]:
 
 
 def _positive(name: str, value: object, *, allow_zero: bool = False) -> float:
-    if isinstance(value, bool) or not isinstance(value, int | float):
+    if not is_number(value):
         raise SweepPlanError(name, value, "not a number")
     number = float(value)
     if not math.isfinite(number):
@@ -219,7 +220,7 @@ class SweepPlan:
         ) -> tuple[float, ...]:
             out: list[float] = []
             for value in values:
-                if isinstance(value, bool) or not isinstance(value, int | float | np.floating):
+                if not is_number(value):
                     raise SweepPlanError(name, value, "not a number")
                 number = float(value)
                 if not (math.isfinite(number) and low < number <= high):

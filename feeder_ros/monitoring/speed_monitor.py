@@ -21,7 +21,7 @@ import math
 from collections import deque
 from dataclasses import dataclass, field
 
-from feeder_ros.physics.parameters import ParameterError
+from feeder_ros.physics.parameters import ParameterError, is_number
 
 __all__ = [
     "ALARM_NAMES",
@@ -86,11 +86,11 @@ class MonitorConfig:
             "stall_speed_mps",
         ):
             value = getattr(self, name)
-            if not (isinstance(value, int | float) and math.isfinite(value) and value > 0.0):
+            if not (is_number(value) and math.isfinite(value) and value > 0.0):
                 raise ParameterError(f"{name}={value!r} must be finite and > 0")
         for name in ("clear_ratio", "min_confidence"):
             value = getattr(self, name)
-            if not (isinstance(value, int | float) and 0.0 <= value <= 1.0):
+            if not (is_number(value) and 0.0 <= value <= 1.0):
                 raise ParameterError(f"{name}={value!r} must be in [0, 1]")
         first, second = self.transit_pair
         if first == second or min(first, second) < 0:
