@@ -33,6 +33,7 @@ def test_sim_sweep_is_fitted_and_written(
     assert "sweep: 18 points, 18 usable, source sim" in printed
     assert "40 %   31 g     18" in printed
     assert sorted(p.name for p in out.iterdir()) == [
+        ".feeder-outputs",
         "fig10.png",
         "fig9.png",
         "fit.json",
@@ -109,6 +110,24 @@ def test_sim_sweep_is_fitted_and_written(
     assert second.order == first.order
     np.testing.assert_allclose(second.magnitude(band), first.magnitude(band), rtol=1e-6)
     assert refit["groups"][0]["fit_percent"] == pytest.approx(group["fit_percent"], abs=1e-6)
+
+    # the same directory again without the fit: the earlier run's fit and Bode plot are removed
+    # (they would contradict the new sweep), a file of the user's is not
+    (again / "notes.txt").write_text("mine")
+    capsys.readouterr()
+    assert main(["identify", "--source", "csv", str(out / "sweep.csv"), "--no-fit",
+                 "--output", str(again)]) == 0  # fmt: skip
+    printed = capsys.readouterr().out
+    assert (
+        f"removed 2 file(s) an earlier run wrote to {again} and this one did not: fig10.png, "
+        "fit.json" in printed
+    )
+    assert sorted(p.name for p in again.iterdir()) == [
+        ".feeder-outputs",
+        "fig9.png",
+        "notes.txt",
+        "sweep.csv",
+    ]
 
 
 def test_the_default_plan_file_is_found() -> None:

@@ -7,7 +7,12 @@ from pathlib import Path
 import pytest
 
 from feeder_ros.cli.main import CommandError, main
-from feeder_ros.cli.outputs import check_output_dir, check_output_file
+from feeder_ros.cli.outputs import (
+    MANIFEST_NAME,
+    check_output_dir,
+    check_output_file,
+    replace_earlier_outputs,
+)
 
 
 def test_output_file_rules(tmp_path: Path) -> None:
@@ -108,3 +113,58 @@ def test_sim_refuses_a_run_whose_samples_exceed_the_memory(
     err = _refused(["sim", "--duration", "100000", "--rate", "100000"], capsys)
     assert "is 10,000,000,001 samples" in err
     assert "more than this machine's memory" in err
+
+
+def test_an_output_directory_written_again_keeps_only_this_runs_files(tmp_path: Path) -> None:
+    out = tmp_path / "out"
+    out.mkdir()
+    for name in ("a.csv", "b.png", "user.txt"):
+        (out / name).write_text(name)
+    assert replace_earlier_outputs(out, [out / "a.csv", out / "b.png"]) == []
+    assert (out / MANIFEST_NAME).read_text() == "a.csv\nb.png\n"
+    # the next run writes a.csv and c.json: b.png is the earlier run's and goes
+    (out / "c.json").write_text("{}")
+    assert replace_earlier_outputs(out, [out / "a.csv", out / "c.json"]) == ["b.png"]
+    assert sorted(p.name for p in out.iterdir()) == [MANIFEST_NAME, "a.csv", "c.json", "user.txt"]
+    assert (out / MANIFEST_NAME).read_text() == "a.csv\nc.json\n"
+    # paths outside the directory are not recorded
+    assert replace_earlier_outputs(out, [out / "a.csv", tmp_path / "elsewhere.csv"]) == ["c.json"]
+    assert (out / MANIFEST_NAME).read_text() == "a.csv\n"
+
+
+def test_a_record_cannot_reach_outside_the_directory(tmp_path: Path) -> None:
+    out = tmp_path / "out"
+    (out / "sub").mkdir(parents=True)
+    outside = tmp_path / "precious.txt"
+    outside.write_text("keep")
+    (out / "link.png").symlink_to(outside)
+    (out / "sub" / "x.csv").write_text("keep")
+    (out / MANIFEST_NAME).write_text(
+        f"../precious.txt\n{outside}\nsub\nsub/x.csv\nlink.png\n..\n.\n\nmissing.csv\n"
+    )
+    assert replace_earlier_outputs(out, []) == []
+    assert outside.read_text() == "keep"
+    assert (out / "link.png").is_symlink()
+    assert (out / "sub" / "x.csv").read_text() == "keep"
+    assert (out / MANIFEST_NAME).read_text() == ""
+
+
+def test_a_file_that_cannot_be_removed_stays_recorded(
+    tmp_path: Path, monkeypatch: pytest.MonkeyPatch
+) -> None:
+    out = tmp_path
+    (out / "old.png").write_text("x")
+    (out / MANIFEST_NAME).write_text("old.png\n")
+    real_unlink = Path.unlink
+
+    def refuse(self: Path, missing_ok: bool = False) -> None:
+        if self.name == "old.png":
+            raise PermissionError(13, "Permission denied", str(self))
+        real_unlink(self, missing_ok)
+
+    monkeypatch.setattr(Path, "unlink", refuse)
+    assert replace_earlier_outputs(out, [out / "new.png"]) == []
+    assert (out / MANIFEST_NAME).read_text() == "new.png\nold.png\n"
+    monkeypatch.undo()
+    assert replace_earlier_outputs(out, [out / "new.png"]) == ["old.png"]
+    assert not (out / "old.png").exists()

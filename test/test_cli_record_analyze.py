@@ -9,6 +9,7 @@ A recorder killed with SIGKILL leaves a bag that ``feeder analyze`` reads and re
 from __future__ import annotations
 
 import json
+import shutil
 import signal
 import subprocess
 import sys
@@ -276,6 +277,22 @@ def test_analyze_cli_outputs_and_bad_input(tmp_path: Path) -> None:
     assert rows[1].split(",")[:2] == [str(tmp_path / "good"), "ok"]
     assert rows[2].split(",")[1] == "error"
     assert (tmp_path / "out" / "good_segments.csv").is_file()
+
+    # the same bag under another name into the same directory: the tables named after the
+    # first bag are the earlier run's, and go (a script reading *_segments.csv would count both)
+    first = sorted(p.name for p in (tmp_path / "out").glob("good_*"))
+    assert "good_segments.png" in first
+    shutil.copytree(tmp_path / "good", tmp_path / "other")
+    again = analyze_into(tmp_path / "other", tmp_path / "out")
+    assert again.returncode == 0, again.stderr
+    assert again.stdout.rstrip().splitlines()[-1] == (
+        f"removed {len(first)} file(s) an earlier run wrote to {tmp_path / 'out'} and this one "
+        f"did not: {', '.join(first)}"
+    )
+    assert not list((tmp_path / "out").glob("good_*"))
+    assert sorted(p.name for p in (tmp_path / "out").glob("other_*")) == [
+        name.replace("good_", "other_", 1) for name in first
+    ]
 
 
 def analyze_into(bag: Path, out: Path) -> subprocess.CompletedProcess[str]:

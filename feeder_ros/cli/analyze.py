@@ -14,7 +14,7 @@ import sys
 from pathlib import Path
 
 from feeder_ros.cli.arguments import non_negative_float
-from feeder_ros.cli.outputs import check_output_dir
+from feeder_ros.cli.outputs import check_output_dir, finish_output_dir
 from feeder_ros.cli.progress import ProgressBar
 
 __all__ = ["EPILOG", "HELP", "add_arguments", "run"]
@@ -83,6 +83,7 @@ def run(args: argparse.Namespace) -> int:
         print(
             f"wrote {len(written)} file(s) to {args.output} (report: {args.output / 'report.html'})"
         )
+        finish_output_dir(args.output, written)
     status = 0
     for a in analyses:
         if not a.ok:

@@ -24,7 +24,7 @@ from pathlib import Path
 
 from feeder_ros.cli.arguments import int_at_least, non_negative_int, positive_int
 from feeder_ros.cli.main import CommandError
-from feeder_ros.cli.outputs import check_output_dir
+from feeder_ros.cli.outputs import check_output_dir, finish_output_dir
 from feeder_ros.cli.progress import ProgressBar
 from feeder_ros.cli.sim import add_plant_arguments, default_config_path, plant_from_arguments
 from feeder_ros.design.optimizer import (
@@ -165,10 +165,12 @@ def run(args: argparse.Namespace) -> int:
     print(summary(result, reference, plant_label, args.seed))
     print(sensitivity_text(rows))
     if args.output is not None:
-        for path in write_report(
+        written = write_report(
             Path(args.output), result, reference, rows, args.seed, args.map_points
-        ):
+        )
+        for path in written:
             print(f"wrote {path}")
+        finish_output_dir(Path(args.output), written)
     if not result.feasible:
         print(
             "feeder design: no evaluated design meets every condition; the least violating one is "

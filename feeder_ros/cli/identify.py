@@ -30,7 +30,7 @@ from typing import TYPE_CHECKING, Any
 
 from feeder_ros.cli.arguments import non_negative_float, positive_float
 from feeder_ros.cli.main import CommandError
-from feeder_ros.cli.outputs import check_output_dir, check_output_file
+from feeder_ros.cli.outputs import check_output_dir, check_output_file, finish_output_dir
 from feeder_ros.cli.progress import ProgressBar
 from feeder_ros.cli.sim import add_plant_arguments, default_config_path, plant_from_arguments
 from feeder_ros.identification.group_fit import DEFAULT_FOLDS, FitSettings, GroupFit, fit_group
@@ -448,6 +448,7 @@ def run(args: argparse.Namespace) -> int:
     if args.output is not None:
         written = write_outputs(args.output, result, fits, document)
         print(f"wrote {', '.join(p.name for p in written)} to {args.output}")
+        finish_output_dir(args.output, written)
     if not args.no_fit and not any(f.best is not None for f in fits):
         raise CommandError(
             "no model could be fitted: " + "; ".join(f.error for f in fits if f.error)

@@ -8,17 +8,33 @@ is worse than one refused at once. The rules, the same for every sub-command:
 * an output **directory** (``--output DIR``, ``--plot DIR``) must not be a file; it is created
   (with its parents) when written, so the nearest existing ancestor must be a directory we may
   write in.
+
+A directory written again holds only this run's files: a run records the names it wrote in
+``.feeder-outputs`` there, and the next run into it removes those of them it did not write again
+(a fit, a plot or a bag's tables from an earlier run would otherwise sit beside new results and
+contradict them). Files it did not write itself are never touched.
 """
 
 from __future__ import annotations
 
 import os
 import tempfile
+from collections.abc import Iterable
 from pathlib import Path
 
+from feeder_ros.atomic_files import atomic_text
 from feeder_ros.cli.main import CommandError
 
-__all__ = ["check_output_dir", "check_output_file"]
+__all__ = [
+    "MANIFEST_NAME",
+    "check_output_dir",
+    "check_output_file",
+    "finish_output_dir",
+    "replace_earlier_outputs",
+]
+
+#: the file in an output directory that names the files the last run wrote there
+MANIFEST_NAME = ".feeder-outputs"
 
 
 def check_output_file(path: Path | None, option: str) -> None:
@@ -59,3 +75,58 @@ def _probe(directory: Path, what: str) -> None:
         os.rmdir(tempfile.mkdtemp(prefix=".feeder-probe-", dir=directory))
     except OSError as error:
         raise CommandError(f"{what}: cannot write in {directory}: {error.strerror}") from None
+
+
+def replace_earlier_outputs(directory: Path, written: Iterable[Path]) -> list[str]:
+    """After a run has written ``written`` into ``directory``: remove the files an earlier run
+    recorded there and this one did not write, record this run's, and return the names removed.
+
+    Only plain file names from the record are removed, never a directory or a link, so a record
+    edited by hand cannot reach outside ``directory``. A file that cannot be removed stays
+    recorded (the next run tries again)."""
+    here = directory.resolve()
+    names = sorted({p.name for p in written if p.parent.resolve() == here})
+    manifest = directory / MANIFEST_NAME
+    earlier: list[str] = []
+    try:
+        earlier = manifest.read_text(encoding="utf-8").splitlines()
+    except FileNotFoundError:
+        pass
+    except (OSError, UnicodeDecodeError):
+        earlier = []  # unreadable: nothing known to be ours
+    removed: list[str] = []
+    kept: list[str] = []
+    for name in dict.fromkeys(earlier):
+        if name in names or not _plain_name(name):
+            continue
+        path = directory / name
+        if path.is_symlink() or not path.is_file():
+            continue
+        try:
+            path.unlink()
+        except OSError:
+            kept.append(name)
+        else:
+            removed.append(name)
+    with atomic_text(manifest) as stream:
+        stream.writelines(f"{name}\n" for name in sorted({*names, *kept}))
+    return removed
+
+
+def finish_output_dir(directory: Path, written: Iterable[Path]) -> None:
+    """:func:`replace_earlier_outputs`, saying on stdout which files it removed."""
+    removed = replace_earlier_outputs(directory, written)
+    if removed:
+        print(
+            f"removed {len(removed)} file(s) an earlier run wrote to {directory} and this one "
+            f"did not: {', '.join(removed)}"
+        )
+
+
+def _plain_name(name: str) -> bool:
+    return (
+        bool(name)
+        and name not in (".", "..", MANIFEST_NAME)
+        and "/" not in name
+        and (os.sep not in name)
+    )

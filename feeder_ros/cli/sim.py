@@ -25,7 +25,7 @@ import numpy as np
 from feeder_ros.atomic_files import atomic_text
 from feeder_ros.cli.arguments import non_negative_int, positive_float
 from feeder_ros.cli.main import CommandError
-from feeder_ros.cli.outputs import check_output_dir, check_output_file
+from feeder_ros.cli.outputs import check_output_dir, check_output_file, finish_output_dir
 from feeder_ros.cli.progress import ProgressBar
 from feeder_ros.nodes.platform_simulator_parameters import NODE_PARAMETERS
 from feeder_ros.physics.parameters import FeederParameters, ParameterError, parse_parameter_value
@@ -342,6 +342,7 @@ def run(args: argparse.Namespace) -> int:
             params, parts or default_parts(params, 1), min(DETAIL_WINDOW_S, args.duration)
         )
         figures = plot_result(result, params, Path(args.plot), detail=detail)
+        finish_output_dir(Path(args.plot), figures)
 
     print(summary(params, result, args.duration, wall, figures, warmup))
     return 0
