@@ -38,12 +38,14 @@ from numpy.typing import ArrayLike, NDArray
 from scipy.optimize import least_squares, minimize_scalar
 
 __all__ = [
+    "FREQUENCY_RESOLUTION_HZ",
     "FitResult",
     "IdentificationError",
     "OrderScore",
     "RationalModel",
     "best_order",
     "compare_orders",
+    "distinct_frequencies",
     "fit_percent",
     "fit_rational",
     "min_distinct_frequencies",
@@ -54,6 +56,9 @@ C128 = NDArray[np.complex128]
 
 _LOG_BOUND = 20.0  # |log| of a normalised root scale: roots within e^-20 .. e^20 x w_ref
 _CONJUGATE_RTOL = 1e-9  # relative tolerance for "these two roots are a conjugate pair"
+#: frequencies closer than this are one frequency (Hz): points 1e-12 Hz apart are repeats of one
+#: setting, not a frequency response (a fit over them only fits noise)
+FREQUENCY_RESOLUTION_HZ = 1e-6
 
 
 class IdentificationError(ValueError):
@@ -531,12 +536,23 @@ def _checked_data(
     return _Data(frequency, speed, mu, amplitude)
 
 
+def distinct_frequencies(frequency_hz: ArrayLike) -> tuple[F64, NDArray[np.intp]]:
+    """The distinct frequencies, ascending (those within ``FREQUENCY_RESOLUTION_HZ`` of each
+    other on its grid are one, represented by its first point), and each point's index into
+    them."""
+    f = np.asarray(frequency_hz, dtype=np.float64)
+    keys = np.round(f / FREQUENCY_RESOLUTION_HZ)
+    _, first, inverse = np.unique(keys, return_index=True, return_inverse=True)
+    return f[first], inverse.reshape(f.shape)
+
+
 def _require_enough_frequencies(data: _Data, zeros: int, poles: int) -> None:
     used = data.weights > 0.0
-    distinct = np.unique(data.frequency_hz[used])
+    distinct, _ = distinct_frequencies(data.frequency_hz[used])
     if distinct.size == 1:
         raise IdentificationError(
-            f"only one distinct frequency ({distinct[0]:g} Hz): a frequency response needs several"
+            f"only one distinct frequency ({distinct[0]:g} Hz; frequencies closer than "
+            f"{FREQUENCY_RESOLUTION_HZ:g} Hz count as one): a frequency response needs several"
         )
     parameters = zeros + poles + 1
     if distinct.size < parameters + 1:
@@ -618,7 +634,7 @@ def fit_rational(
 
 def _resolution_hz(frequency_hz: F64) -> float:
     """The median step between the sorted distinct frequencies."""
-    return float(np.median(np.diff(np.unique(frequency_hz))))
+    return float(np.median(np.diff(distinct_frequencies(frequency_hz)[0])))
 
 
 def _frozen(array: F64) -> F64:
@@ -748,7 +764,7 @@ def _fold_of_each_point(frequency_hz: F64, folds: int, block: int) -> NDArray[np
     """Fold of each point: the sorted distinct frequencies in runs of ``block`` neighbours, runs
     dealt to the folds in turn ((rank // block) % folds). Repeats of one frequency share a fold,
     so a held-out frequency is never also seen in training."""
-    distinct, inverse = np.unique(frequency_hz, return_inverse=True)
+    distinct, inverse = distinct_frequencies(frequency_hz)
     rank = np.arange(distinct.size)[inverse]
     return np.asarray((rank // block) % folds, dtype=np.int64)
 
@@ -802,7 +818,7 @@ def compare_orders(
         raise IdentificationError("orders is empty: nothing to compare")
     checked = [_order(z, p) for z, p in orders]
     used = data.weights > 0.0
-    distinct = np.unique(data.frequency_hz[used]).size
+    distinct = distinct_frequencies(data.frequency_hz[used])[0].size
     for zeros, poles in checked:
         _require_enough_frequencies(data, zeros, poles)
         needed = min_distinct_frequencies(zeros, poles, folds, block)

@@ -30,6 +30,7 @@ import numpy as np
 import numpy.typing as npt
 
 from feeder_ros.csv_cells import csv_cell
+from feeder_ros.identification.rational_fit import distinct_frequencies
 from feeder_ros.physics.parameters import is_number
 
 __all__ = [
@@ -49,8 +50,6 @@ F64 = npt.NDArray[np.float64]
 
 #: values a range may expand to (a typo such as 38:58:0.0005 is refused, not run)
 MAX_VALUES = 10_000
-#: frequencies closer than this are one frequency (Hz)
-FREQUENCY_RESOLUTION_HZ = 1e-6
 
 
 class SweepPlanError(ValueError):
@@ -567,7 +566,7 @@ def check_fit_data(
         )
     if f.size == 0:
         raise SweepDataError(f"{what}: no usable points")
-    distinct = np.unique(np.round(f / FREQUENCY_RESOLUTION_HZ))
+    distinct, _ = distinct_frequencies(f)
     if distinct.size == 1:
         raise SweepDataError(
             f"{what}: a single frequency ({f[0]:g} Hz, {f.size} point(s)); a frequency response "

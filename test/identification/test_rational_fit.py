@@ -9,10 +9,12 @@ import numpy as np
 import pytest
 
 from feeder_ros.identification.rational_fit import (
+    FREQUENCY_RESOLUTION_HZ,
     IdentificationError,
     RationalModel,
     best_order,
     compare_orders,
+    distinct_frequencies,
     fit_percent,
     fit_rational,
     min_distinct_frequencies,
@@ -232,6 +234,23 @@ def test_best_order_breaks_ties_towards_fewer_parameters() -> None:
         best_order([])
 
 
+def test_frequencies_within_the_resolution_are_one() -> None:
+    """Points closer than FREQUENCY_RESOLUTION_HZ are repeats of one setting: they share a fold
+    of the hold-out check and count once towards the order's needs."""
+    f = np.array([45.0, 40.0, 40.0 + 1e-9, 50.0, 45.0 + 4e-7, 40.0 + 2e-6])
+    distinct, inverse = distinct_frequencies(f)
+    np.testing.assert_array_equal(distinct, [40.0, 40.0 + 2e-6, 45.0, 50.0])
+    np.testing.assert_array_equal(inverse, [2, 0, 0, 3, 2, 1])
+    assert FREQUENCY_RESOLUTION_HZ == 1e-6
+    needed = min_distinct_frequencies(0, 1)
+    spread = np.linspace(40.0, 50.0, needed)
+    speeds = RationalModel(1.0, (), (-2.0 * math.pi * 45.0,)).magnitude(spread)
+    nearly = spread.copy()
+    nearly[1] = nearly[0] + 1e-10  # five points, four frequencies
+    with pytest.raises(IdentificationError, match=r"needs >= 5 distinct frequencies.*got 4"):
+        compare_orders(nearly, speeds, 1.0, [(0, 1)])
+
+
 def test_min_distinct_frequencies_is_what_compare_orders_needs() -> None:
     needed = min_distinct_frequencies(0, 1)  # 3 parameters kept in every training set
     assert needed == 5
@@ -254,7 +273,10 @@ V = [0.01, 0.03, 0.02, 0.01]
         ([40.0, math.nan, 50.0, 55.0], V, 1.0, (0, 1), r"frequency_hz\[1\] = nan is not finite"),
         (F, [0.01, 0.03, math.inf, 0.01], 1.0, (0, 1), r"speed_mps\[2\] = inf is not finite"),
         (F, V, 1.0, (1, 3), r"5 free parameters .* needs >= 6 distinct frequencies; got 4"),
-        ([45.0] * 4, V, 1.0, (0, 0), r"only one distinct frequency \(45 Hz\)"),
+        ([45.0] * 4, V, 1.0, (0, 0), r"only one distinct frequency \(45 Hz; frequencies closer"),
+        # 1e-12 Hz apart: repeats of one setting, not a frequency response
+        ([20.0 + k * 1e-12 for k in range(4)], V, 1.0, (0, 1), r"only one distinct frequency"),
+        ([40.0, 40.0 + 1e-9, 50.0, 55.0], V, 1.0, (1, 1), r"needs >= 4 distinct.*; got 3"),
         ([40.0, 0.0, 50.0, 55.0], V, 1.0, (0, 1), r"frequency_hz\[1\] = 0\.0 must be > 0"),
         ([40.0, -5.0, 50.0, 55.0], V, 1.0, (0, 1), r"frequency_hz\[1\] = -5\.0 must be > 0"),
         (F, V[:3], 1.0, (0, 1), "frequency_hz has 4 values but speed_mps has 3"),
