@@ -127,7 +127,7 @@ NODE_PARAMETERS = (
         str,
         "",
         "directory of cached speed tables (keyed by every input); empty: "
-        "$XDG_CACHE_HOME/feeder_ros/speed_tables",
+        "$XDG_CACHE_HOME/feeder_ros/speed_tables" + _AT_CONFIGURE,
     ),
     ParameterSpec(
         "speed_model_file",

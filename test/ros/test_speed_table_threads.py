@@ -1,6 +1,7 @@
 """The drive interface computes a speed table that is not cached yet in its configure transition.
 On a machine shared with the live cell it must leave a core to the other nodes: with every core
-taken, a 2-core machine starved the simulator and the estimator raised a sensor timeout."""
+taken, a 2-core machine starved the simulator and the estimator raised a sensor timeout. Where
+the table is cached is read at configure too."""
 
 from __future__ import annotations
 
@@ -43,6 +44,14 @@ def test_speed_table_is_computed_with_a_core_left_free(
         )
         try:
             assert node.trigger_configure() == TransitionCallbackReturn.SUCCESS
+            # the cache directory is read at configure: a change now would act only at the next
+            # configure, so it is refused like the table's other inputs
+            [moved] = node.set_parameters(
+                [Parameter("speed_model_cache_dir", value=str(tmp_path / "elsewhere"))]
+            )
+            assert not moved.successful
+            assert moved.reason.startswith("speed_model_cache_dir is read at configure")
+            assert node.get_parameter("speed_model_cache_dir").value == str(tmp_path)
         finally:
             node.destroy_node()
     finally:
