@@ -307,9 +307,16 @@ def test_ramps_stop_estop_and_deactivate_on_the_wire() -> None:
         assert not refused.success
         assert "no heartbeat received" in refused.message
         cell.start_heartbeat()
-        refused = cell.trigger("start")
-        assert not refused.success
-        assert "call set_drive" in refused.message
+        # refused for the next reason once a beat has reached the node (the beats' delivery is
+        # not awaited by start_heartbeat)
+        refusals: list[Trigger.Response] = []
+
+        def refused_for_want_of_a_set_point() -> bool:
+            refusals.append(cell.trigger("start"))
+            return "call set_drive" in refusals[-1].message
+
+        assert wait_until(refused_for_want_of_a_set_point, 5.0), refusals[-1].message
+        assert not any(r.success for r in refusals)
         bad = cell.set_drive(math.nan, 40.0, 0.0)
         assert bad.result == SetDrive.Response.REFUSED
         assert "frequency_hz=nan is not finite" in bad.reason
@@ -329,6 +336,11 @@ def test_ramps_stop_estop_and_deactivate_on_the_wire() -> None:
         assert started.success, started.message
         assert "in 3.000 s" in started.message
         cell.wait_state(DriveState.STATE_RUNNING)
+        # the top of the ramp goes out on drive/command in the tick that reports RUNNING on
+        # drive/state: two writers, so it may arrive after the state
+        assert wait_until(
+            lambda: any(c.amplitude_percent == 60.0 for c in cell.commands_since(t_start)), 5.0
+        )
         ramp = cell.commands_since(t_start)
         amplitudes = _amplitudes(ramp)
         assert max(amplitudes) == 60.0
@@ -363,12 +375,21 @@ def test_ramps_stop_estop_and_deactivate_on_the_wire() -> None:
         cell.wait_state(DriveState.STATE_RUNNING)
         t_estop = cell.now_s()
         answer = cell.trigger("emergency_stop")
+        t_answered = cell.now_s()
         assert answer.success
         estop = cell.wait_state(DriveState.STATE_ESTOP)
         assert estop.fault_reason == "emergency stop requested"
         assert estop.amplitude_percent == 0.0
         assert wait_until(lambda: len(cell.commands_since(t_estop)) > 20, 5.0)
-        assert not any(c.enabled for c in cell.commands_since(t_estop + 0.1))
+        # the zero command is sent before the service answers; from it on, nothing is enabled
+        # (not from t_estop: that is taken before the client's discovery of the service, while
+        # the running output still went out)
+        off = min(
+            (c for c in cell.commands_since(t_estop) if not c.enabled),
+            key=lambda c: stamp_s(c.header),
+        )
+        assert stamp_s(off.header) <= t_answered
+        assert not any(c.enabled for c in cell.commands_since(stamp_s(off.header)))
         refused = cell.trigger("start")
         assert not refused.success
         assert "emergency stop latched" in refused.message
@@ -387,9 +408,9 @@ def test_ramps_stop_estop_and_deactivate_on_the_wire() -> None:
         assert cell.transition(Transition.TRANSITION_DEACTIVATE)
         assert cell.lifecycle_state() == "inactive"
         cell.wait_state(DriveState.STATE_IDLE)
+        assert wait_until(lambda: not cell.commands[-1].enabled, 5.0)  # (two writers, as above)
         down = cell.commands_since(t_deactivate)
         assert len([a for a in _amplitudes(down) if 0.0 < a < 60.0]) >= 30
-        assert not cell.commands[-1].enabled
         refused = cell.trigger("start")
         assert not refused.success
         assert "not active" in refused.message
