@@ -76,6 +76,18 @@ def drive(node: Node, ns: str, frequency_hz: float, amplitude_n: float) -> Any:
     return send
 
 
+def newest_stamps(bag: Path, types: dict[str, Any]) -> dict[str, int]:
+    """The newest header stamp [ns] of each topic in ``types`` (topic -> message class) that
+    rosbags reads in ``bag``."""
+    newest: dict[str, int] = {}
+    with RosbagsReader(bag) as reader:
+        conns = [c for c in reader.connections if c.topic in types]
+        for conn, _, raw in reader.messages(connections=conns):
+            stamp = stamp_ns(deserialize_message(raw, types[conn.topic]))
+            newest[conn.topic] = max(newest.get(conn.topic, stamp), stamp)
+    return newest
+
+
 def test_record_a_simulator_and_read_the_bag_back(tmp_path: Path) -> None:
     ns = "/rec_cli"
     bag = tmp_path / "run1"
@@ -92,7 +104,18 @@ def test_record_a_simulator_and_read_the_bag_back(tmp_path: Path) -> None:
             time.sleep(6.0)  # discovery (slow on a loaded machine), then seconds of data
         assert process.returncode == 0, process.output()
         output = process.output()
-        time.sleep(0.5)  # the probe goes on receiving after the recorder stopped
+        # the probe has everything the recorder kept once it has each topic's last recorded
+        # message (one reliable writer per topic: delivered in order)
+        last_recorded = newest_stamps(bag, {f"{ns}/carrier/state": CarrierState,
+                                            f"{ns}/parts/state": PartStateArray})  # fmt: skip
+        assert wait_until(
+            lambda: (
+                bool(states and parts)
+                and stamp_ns(states[-1]) >= last_recorded[f"{ns}/carrier/state"]
+                and stamp_ns(parts[-1]) >= last_recorded[f"{ns}/parts/state"]
+            ),
+            20,
+        )
 
     assert f"into {bag}" in output
     assert "stopped by signal" in output
