@@ -443,12 +443,18 @@ def test_sim_backend_warns_while_no_simulator_listens() -> None:
             status = cell.last_diagnostic()
             return {} if status is None else {kv.key: kv.value for kv in status.values}
 
-        assert wait_until(lambda: values().get("drive/command subscribers") == "0", 10.0)
-        status = cell.last_diagnostic()
-        assert status.level == DiagnosticStatus.WARN
-        assert status.message == (
+        expected = (
             "idle; backend: no subscriber on drive/command: is the platform simulator running?"
         )
+
+        def active_and_warning() -> bool:  # (arrays from before the activation say "inactive")
+            status = cell.last_diagnostic()
+            return status is not None and status.message == expected
+
+        assert wait_until(active_and_warning, 10.0), cell.last_diagnostic()
+        status = cell.last_diagnostic()
+        assert status.level == DiagnosticStatus.WARN
+        assert values().get("drive/command subscribers") == "0"
         assert values()["backend connected"] == "True"
         assert cell.set_drive(30.0, 10.0, 0.0).result == SetDrive.Response.ACCEPTED
         started = cell.trigger("start")  # allowed: a simulator that joins follows the stream
