@@ -17,6 +17,7 @@ contradict them). Files it did not write itself are never touched.
 
 from __future__ import annotations
 
+import contextlib
 import os
 import tempfile
 from collections.abc import Iterable
@@ -85,15 +86,12 @@ def replace_earlier_outputs(directory: Path, written: Iterable[Path]) -> list[st
     edited by hand cannot reach outside ``directory``. A file that cannot be removed stays
     recorded (the next run tries again)."""
     here = directory.resolve()
-    names = sorted({p.name for p in written if p.parent.resolve() == here})
+    names = {p.name for p in written if p.parent.resolve() == here}
     manifest = directory / MANIFEST_NAME
     earlier: list[str] = []
-    try:
+    # no record, or an unreadable one: nothing known to be ours
+    with contextlib.suppress(OSError, UnicodeDecodeError):
         earlier = manifest.read_text(encoding="utf-8").splitlines()
-    except FileNotFoundError:
-        pass
-    except (OSError, UnicodeDecodeError):
-        earlier = []  # unreadable: nothing known to be ours
     removed: list[str] = []
     kept: list[str] = []
     for name in dict.fromkeys(earlier):
@@ -124,9 +122,4 @@ def finish_output_dir(directory: Path, written: Iterable[Path]) -> None:
 
 
 def _plain_name(name: str) -> bool:
-    return (
-        bool(name)
-        and name not in (".", "..", MANIFEST_NAME)
-        and "/" not in name
-        and (os.sep not in name)
-    )
+    return name not in ("", ".", "..", MANIFEST_NAME) and "/" not in name and os.sep not in name
