@@ -42,10 +42,12 @@ carries one velocity history; its members differ only by a track offset. With tw
 group also carries the summed mass of its members. :func:`advance` runs carrier and groups in one
 event loop (any coupling); with one-way coupling :func:`advance` can instead record the carrier's
 closed-form pieces, along which :func:`advance_groups` marches every group independently, in
-parallel. There each piece is tabulated once for all groups (:func:`piece_tables`): a group passes
-the cells between nodes on their end values (:func:`_cell`), solves a cell holding one root by a
-bracketed Halley iteration on the closed form, halves undecided cells with exact evaluations, and
-falls back to the safe steps above only when halving does not decide.
+parallel. There each piece is tabulated once for all groups (:func:`piece_tables`): a slipping
+group passes whole runs of cells on which the carrier's jerk keeps its sign (its relative velocity
+is concave or convex there) on a few table values, any group passes the other cells between nodes
+on their end values (:func:`_cell`), solves a cell holding one root by a bracketed Halley
+iteration on the closed form, halves undecided cells with exact evaluations, and falls back to the
+safe steps above only when halving does not decide.
 """
 
 # mypy: disable-error-code="misc, no-untyped-def"
@@ -458,13 +460,34 @@ def _node_count_and_step(pieces, k):
     return cells + 1, T / cells
 
 
+@njit(cache=True, inline="always")
+def _jerk_keeps_its_sign(ya, yb, da, db, B5, h, tol3, tol4):
+    """True when ``x'''`` provably keeps the sign of its end values ``ya, yb`` on a cell of length
+    ``h``, from its slopes ``da, db`` there and ``|x^(5)| <= B5``: above the chord's lower
+    envelope, or monotone (the slope keeps its sign when ``|da + db| > B5*h``). ``tol3`` and
+    ``tol4`` are the round-off of the tabulated ``x'''`` and ``x''''``."""
+    if ya < 0.0:
+        ya, yb, da, db = -ya, -yb, -da, -db
+    if not (ya > tol3 and yb > tol3):
+        return False
+    if min(ya, yb) - 0.125 * B5 * h * h > tol3:
+        return True
+    return da * db > 0.0 and abs(da + db) > B5 * h + 2.0 * tol4
+
+
 @njit(cache=True)
 def piece_tables(pieces, n_pieces):
     """Node tables of the recorded pieces, shared by all groups: ``(node_start, node_h, tab,
-    bnd)``. Piece ``k`` has nodes ``node_start[k] .. node_start[k + 1] - 1`` at local times
-    ``i*node_h[k]`` (the last at the piece's end), ``tab[node] = x .. x''''`` there (exact closed
-    form), and ``bnd[k, r]`` bounds ``|x^(r)|`` over the whole piece (r = 0 .. 5); ``bnd[k,
-    BND_SIN_PHI:]`` holds the drive phase's sine and cosine and the basis bounds at its start."""
+    bnd, run_end)``. Piece ``k`` has nodes ``node_start[k] .. node_start[k + 1] - 1`` at local
+    times ``i*node_h[k]`` (the last at the piece's end), ``tab[node] = x .. x''''`` there (exact
+    closed form), and ``bnd[k, r]`` bounds ``|x^(r)|`` over the whole piece (r = 0 .. 5); ``bnd[k,
+    BND_SIN_PHI:]`` holds the drive phase's sine and cosine and the basis bounds at its start.
+
+    ``run_end[node]`` is for the cell from ``node`` to the next node: -1 unless the carrier's jerk
+    ``x'''`` provably keeps one sign on the cell; then the last node of the longest stretch of such
+    cells from it (within the piece), all of one sign. On such a run a slipping part's relative
+    velocity is convex or concave (its curvature is ``-+x'''``), which decides its roots there
+    from a few values (see :func:`_march_group`)."""
     node_start = np.zeros(n_pieces + 1, np.int64)
     node_h = np.zeros(n_pieces)
     for k in range(n_pieces):
@@ -501,7 +524,22 @@ def piece_tables(pieces, n_pieces):
             cc, ss, sn, cs = _basis(tau, sigma, lam, root, r1, w, phi)
             for r in range(TAB_WIDTH):
                 tab[a + i, r] = _row(rows, r, cc, ss, sn, cs)
-    return node_start, node_h, tab, bnd
+    run_end = np.full(node_start[n_pieces], -1, np.int64)
+    for k in range(n_pieces):
+        a = node_start[k]
+        n = node_start[k + 1] - a
+        tol3 = 64.0 * EPS * bnd[k, 3]
+        tol4 = 64.0 * EPS * bnd[k, 4]
+        for c in range(n - 2, -1, -1):  # from the end: a cell's run goes on in the next cell's
+            h = pieces[k, P_LEN] - c * node_h[k] if c == n - 2 else node_h[k]
+            if _jerk_keeps_its_sign(
+                tab[a + c, 3], tab[a + c + 1, 3], tab[a + c, 4], tab[a + c + 1, 4],
+                bnd[k, 5], h, tol3, tol4,
+            ):  # fmt: skip
+                # the next cell's run (if any) has the same sign: the cells share the node
+                after = run_end[a + c + 1] if c < n - 2 else -1
+                run_end[a + c] = after if after >= 0 else a + c + 1
+    return node_start, node_h, tab, bnd, run_end
 
 
 DERIVATIVE_ZERO = 1e-10  # relative size below which a derivative counts as zero on release
@@ -1601,6 +1639,7 @@ def _march_group(
     node_h,
     tab,
     bnd,
+    run_end,
     track,
     t_end,
     samples,
@@ -1799,6 +1838,11 @@ def _march_group(
                 B3f = abs(sgn0) * bnd[k, fr + 3]
                 tol = 64.0 * EPS * (abs(sgn0) * bnd[k, fr] + abs(f_c0[0]) + rem * abs(f_c1[0]))
                 dtol = DERIVATIVE_ZERO * (abs(sgn0) * bnd[k, fr + 1] + abs(f_c1[0]))
+                runs = nfast == 1 and fr == 1  # slipping: the relative velocity, searched by runs
+                c00 = f_c0[0]
+                c10 = f_c1[0]
+                errd = 64.0 * EPS * (bnd[k, 2] + abs(c10))  # round-off of its slope at a node
+                declined = -1  # runs of cells before this node are left to the cell tests
                 u0 = _row(rows, fr, cc, ss, sn, cs)
                 u1 = _row(rows, fr + 1, cc, ss, sn, cs)
                 u2 = _row(rows, fr + 2, cc, ss, sn, cs)
@@ -1813,39 +1857,131 @@ def _march_group(
                 sp = 0  # pending right ends from splitting undecided cells (exact values)
                 while not unsure:
                     if sp == 0 and i < nk - 1:
-                        # first the cells that their end values clear (the common case, and
-                        # _cell's first test, made on the same values): the slopes and
-                        # curvatures are not needed for them. The piece's last cell (its end is
-                        # the piece's, not a node) goes to the full test below.
-                        q = i
-                        sq = sa
-                        uq = u0
-                        while q < nk - 1:
-                            sbq = q * hk - ts
-                            wq = tab[base + q, fr]
-                            hq = sbq - sq
-                            clear = True
-                            for j in range(nfast):
-                                fa = f_sgn[j] * uq + f_c0[j] + f_c1[j] * sq
-                                fb = f_sgn[j] * wq + f_c0[j] + f_c1[j] * sbq
-                                if not (
-                                    fa > tol
-                                    and fb > tol
-                                    and min(fa, fb) - 0.125 * Bf * hq * hq > tol
-                                ):
-                                    clear = False
+                        while True:
+                            at_run = False
+                            while runs and i < nk - 1:
+                                # the slip phase's runs first: on a run of cells where the
+                                # carrier's jerk keeps its sign (piece_tables), the relative
+                                # velocity f = sg*x' + c0 + c1*s is concave or convex (f'' =
+                                # sg*x'''), and a few values decide its roots on all of it
+                                c = i - 1
+                                e = min(run_end[base + c] - base, nk - 2)
+                                if e < i or base + c < declined:
                                     break
-                            if not clear:
+                                fa = sgn0 * u0 + c00 + c10 * sa
+                                if not fa > tol and not sgn0 * u1 + c10 > dtol:
+                                    break  # on its zero at sa, not leaving it: the cell tests
+                                convex = sgn0 * tab[base + c, 3] > 0.0
+                                skip = convex and sgn0 * u1 + c10 > errd  # rising all along
+                                m = e + 1  # convex: the first node with f' >= -errd, if any
+                                if convex and not skip and sgn0 * tab[base + e, 2] + c10 >= -errd:
+                                    lo_n = c
+                                    m = e
+                                    while m - lo_n > 1:
+                                        mid = (lo_n + m) // 2
+                                        if sgn0 * tab[base + mid, 2] + c10 >= -errd:
+                                            m = mid
+                                        else:
+                                            lo_n = mid
+                                if not skip:
+                                    # f is concave, or falling up to node m - 1: above zero up
+                                    # to the node before the first node at or below tol
+                                    lim = m - 1
+                                    n = lim + 1
+                                    if (
+                                        lim > c
+                                        and sgn0 * tab[base + lim, 1] + c00 + c10 * (lim * hk - ts)
+                                        <= tol
+                                    ):
+                                        lo_n = c
+                                        n = lim
+                                        while n - lo_n > 1:
+                                            mid = (lo_n + n) // 2
+                                            sm = mid * hk - ts
+                                            if sgn0 * tab[base + mid, 1] + c00 + c10 * sm <= tol:
+                                                n = mid
+                                            else:
+                                                lo_n = mid
+                                    if n - 1 > c:
+                                        sa = (n - 1) * hk - ts
+                                        u0 = tab[base + n - 1, 1]
+                                        u1 = tab[base + n - 1, 2]
+                                        u2 = tab[base + n - 1, 3]
+                                        i = n
+                                    if n <= lim:
+                                        break  # the cell ending at that node: the tests below
+                                    if m > e:
+                                        skip = True  # concave or falling, above tol at node e
+                                    else:
+                                        # convex, its minimum in the cell from sa to node m: the
+                                        # tangents at both ends bound it from below (they meet
+                                        # at the weighted mean below; slopes off by <= errd)
+                                        sq = m * hk - ts
+                                        hq = sq - sa
+                                        fp = sgn0 * u0 + c00 + c10 * sa
+                                        fq = sgn0 * tab[base + m, 1] + c00 + c10 * sq
+                                        slope_a = -(sgn0 * u1 + c10)
+                                        slope_b = sgn0 * tab[base + m, 2] + c10
+                                        if fq > tol and slope_a > errd and slope_b > errd:
+                                            drop = slope_a * slope_b * hq / (slope_a + slope_b)
+                                            low = (slope_a * fq + slope_b * fp) / (
+                                                slope_a + slope_b
+                                            )
+                                            low -= drop
+                                            slack = 8.0 * EPS * (fp + fq + drop) + errd * hq
+                                            skip = low - slack > tol
+                                        if not skip:
+                                            declined = base + e  # the cell tests decide the run
+                                            break
+                                # no root from sa to node e: on to the next run
+                                sa = e * hk - ts
+                                u0 = tab[base + e, 1]
+                                u1 = tab[base + e, 2]
+                                u2 = tab[base + e, 3]
+                                i = e + 1
+                            # then the cells that their end values clear (the common case, and
+                            # _cell's first test, made on the same values): the slopes and
+                            # curvatures are not needed for them. The piece's last cell (its end
+                            # is the piece's, not a node) goes to the full test below.
+                            q = i
+                            sq = sa
+                            uq = u0
+                            while q < nk - 1:
+                                if (
+                                    runs
+                                    and q > i
+                                    and run_end[base + q - 1] >= 0
+                                    and base + q - 1 >= declined
+                                ):
+                                    at_run = True  # a run starts with this cell
+                                    break
+                                sbq = q * hk - ts
+                                wq = tab[base + q, fr]
+                                hq = sbq - sq
+                                clear = True
+                                for j in range(nfast):
+                                    fa = f_sgn[j] * uq + f_c0[j] + f_c1[j] * sq
+                                    fb = f_sgn[j] * wq + f_c0[j] + f_c1[j] * sbq
+                                    if not (
+                                        fa > tol
+                                        and fb > tol
+                                        and min(fa, fb) - 0.125 * Bf * hq * hq > tol
+                                    ):
+                                        clear = False
+                                        break
+                                if not clear:
+                                    break
+                                uq = wq
+                                sq = sbq
+                                q += 1
+                            if q > i:
+                                i = q
+                                sa = sq
+                                u0 = tab[base + q - 1, fr]
+                                u1 = tab[base + q - 1, fr + 1]
+                                u2 = tab[base + q - 1, fr + 2]
+                            if not at_run:
                                 break
-                            uq = wq
-                            sq = sbq
-                            q += 1
-                        if q > i:
-                            i = q
-                            sa = sq
-                            u0 = tab[base + q - 1, fr]
-                            u1 = tab[base + q - 1, fr + 1]
-                            u2 = tab[base + q - 1, fr + 2]
                     if sp > 0:
                         sb = sp_s[sp - 1]
                         w0 = sp_v[sp - 1, 0]
@@ -2208,6 +2344,7 @@ def advance_groups(
     node_h,
     tab,
     bnd,
+    run_end,
     track,
     t_end,
     samples,
@@ -2254,6 +2391,7 @@ def advance_groups(
             node_h,
             tab,
             bnd,
+            run_end,
             track,
             t_end,
             samples,

@@ -38,7 +38,7 @@ def test_node_tables_hold_the_carrier_and_bound_it(monkeypatch: pytest.MonkeyPat
     sim.parallel_min_groups = 1
     sim.march_min_work_s = 0.0
     sim.advance(1.0)
-    (pieces, (start, h, tab, bnd)) = captured[0]
+    (pieces, (start, h, tab, bnd, _run_end)) = captured[0]
     n = pieces.shape[0]
     assert n > 10
     assert start[-1] == tab.shape[0]
@@ -71,6 +71,79 @@ def test_node_tables_hold_the_carrier_and_bound_it(monkeypatch: pytest.MonkeyPat
     mid_jerk = 0.5 * (tab[1:, 3] + tab[:-1, 3])[inner]
     scale = float(np.max(np.abs(tab[:, 3])))
     np.testing.assert_allclose(slope, mid_jerk, rtol=0.0, atol=0.05 * scale)
+
+
+def test_jerk_runs_keep_their_sign(monkeypatch: pytest.MonkeyPatch) -> None:
+    """``run_end`` of the node tables: every cell it marks has the carrier's jerk of one sign on
+    it, densely sampled from the closed form, the same sign all along the run, and the run stays
+    in its piece; most cells are in runs (the slip search passes them by runs)."""
+    captured = []
+    real = k.piece_tables
+
+    def spy(pieces: np.ndarray, n: int) -> tuple[np.ndarray, ...]:
+        out: tuple[np.ndarray, ...] = real(pieces, n)
+        captured.append((pieces[:n].copy(), out))
+        return out
+
+    monkeypatch.setattr(k, "piece_tables", spy)
+    for damping in (0.0, 10.0):
+        params = FeederParameters(drive_amplitude_n=40.0, damping_ns_per_m=damping)
+        sim = FeederSimulator(params, _distinct_parts(6, 1))
+        sim.parallel_min_groups = 1
+        sim.march_min_work_s = 0.0
+        sim.advance(0.5)
+    assert len(captured) >= 2
+    marked = cells = 0
+    for pieces, (start, h, tab, _bnd, run_end) in captured:
+        for p in range(pieces.shape[0]):
+            rows = pieces[p, k.P_ROWS : k.P_ROWS + 30].reshape(6, 5).copy()
+            args = [pieces[p, c] for c in (k.P_SIGMA, k.P_LAM, k.P_ROOT, k.P_R1, k.P_W, k.P_PHI)]
+            a, b = start[p], start[p + 1]
+            assert np.all(run_end[b - 1 : b] == -1)  # the last node starts no cell
+            for c in range(a, b - 1):
+                cells += 1
+                e = run_end[c]
+                if e < 0:
+                    continue
+                marked += 1
+                assert c < e <= b - 1
+                # a run goes on in the next cell's run, or ends at the next node
+                following = run_end[c + 1] if c + 1 < b - 1 else -1
+                assert e == (following if following >= 0 else c + 1)
+                sign = np.sign(tab[c, 3])
+                t0 = (c - a) * h[p]
+                t1 = pieces[p, k.P_LEN] if c + 1 == b - 1 else (c + 1 - a) * h[p]
+                for tau in np.linspace(t0, t1, 41):
+                    jerk = k._row(rows, 3, *k._basis(tau, *args))
+                    assert np.sign(jerk) == sign, (p, c, tau, jerk)
+                assert np.all(np.sign(tab[c : e + 1, 3]) == sign)
+    assert cells > 100
+    assert marked > 0.8 * cells
+
+
+def test_jerk_sign_certificate_agrees_with_dense_sampling() -> None:
+    """``_jerk_keeps_its_sign`` on random sinusoid-plus-line jerks: a cell it certifies has no
+    sign change on a fine grid; cells with a sign change are never certified, and both outcomes
+    occur."""
+    rng = np.random.default_rng(11)
+    s = np.linspace(0.0, 1.0, 2001)
+    certified = refused = 0
+    for _ in range(4000):
+        amp, omega = rng.uniform(0.1, 1.0), rng.uniform(0.5, 6.0)
+        coef = (amp, omega, rng.uniform(0, 2 * np.pi), 0.0, rng.uniform(-1.2, 1.2))
+        h = rng.uniform(0.05, 1.0)
+        values = _wave(coef, s * h, 0)
+        sure = k._jerk_keeps_its_sign(
+            float(values[0]), float(values[-1]), float(_wave(coef, 0.0, 1)),
+            float(_wave(coef, h, 1)), amp * omega**2, h, 0.0, 0.0,
+        )  # fmt: skip
+        if sure:
+            certified += 1
+            assert np.all(np.sign(values) == np.sign(values[0]))
+        else:
+            refused += 1
+    assert certified > 500
+    assert refused > 500
 
 
 def _wave(coef: tuple[float, ...], x: np.ndarray | float, d: int) -> np.ndarray:
