@@ -23,8 +23,11 @@ def _distinct_parts(count: int, seed: int) -> list[PartSpec]:
     ]
 
 
-def test_node_tables_hold_the_carrier_and_bound_it(monkeypatch: pytest.MonkeyPatch) -> None:
-    captured = []
+def _capture_piece_tables(
+    monkeypatch: pytest.MonkeyPatch,
+) -> list[tuple[np.ndarray, tuple[np.ndarray, ...]]]:
+    """Record every ``piece_tables`` call of the group march: (its pieces, its tables)."""
+    captured: list[tuple[np.ndarray, tuple[np.ndarray, ...]]] = []
     real = k.piece_tables
 
     def spy(pieces: np.ndarray, n: int) -> tuple[np.ndarray, ...]:
@@ -33,6 +36,11 @@ def test_node_tables_hold_the_carrier_and_bound_it(monkeypatch: pytest.MonkeyPat
         return out
 
     monkeypatch.setattr(k, "piece_tables", spy)
+    return captured
+
+
+def test_node_tables_hold_the_carrier_and_bound_it(monkeypatch: pytest.MonkeyPatch) -> None:
+    captured = _capture_piece_tables(monkeypatch)
     params = FeederParameters(drive_amplitude_n=40.0, damping_ns_per_m=10.0)
     sim = FeederSimulator(params, _distinct_parts(6, 1))
     sim.parallel_min_groups = 1
@@ -77,15 +85,7 @@ def test_jerk_runs_keep_their_sign(monkeypatch: pytest.MonkeyPatch) -> None:
     """``run_end`` of the node tables: every cell it marks has the carrier's jerk of one sign on
     it, densely sampled from the closed form, the same sign all along the run, and the run stays
     in its piece; most cells are in runs (the slip search passes them by runs)."""
-    captured = []
-    real = k.piece_tables
-
-    def spy(pieces: np.ndarray, n: int) -> tuple[np.ndarray, ...]:
-        out: tuple[np.ndarray, ...] = real(pieces, n)
-        captured.append((pieces[:n].copy(), out))
-        return out
-
-    monkeypatch.setattr(k, "piece_tables", spy)
+    captured = _capture_piece_tables(monkeypatch)
     for damping in (0.0, 10.0):
         params = FeederParameters(drive_amplitude_n=40.0, damping_ns_per_m=damping)
         sim = FeederSimulator(params, _distinct_parts(6, 1))
