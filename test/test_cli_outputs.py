@@ -38,6 +38,12 @@ def test_output_dir_rules(tmp_path: Path) -> None:
         check_output_dir(tmp_path / "file", "--plot")
     with pytest.raises(CommandError, match=r"--output .*file/sub: .*file is not a directory"):
         check_output_dir(tmp_path / "file" / "sub", "--output")
+    (tmp_path / "used" / MANIFEST_NAME).mkdir(parents=True)  # the record's name taken
+    with pytest.raises(CommandError, match=rf"--plot .*used: .*{MANIFEST_NAME} is not a file"):
+        check_output_dir(tmp_path / "used", "--plot")
+    (tmp_path / "fine").mkdir()
+    (tmp_path / "fine" / MANIFEST_NAME).write_text("a.png\n")
+    check_output_dir(tmp_path / "fine", "--plot")  # a record: the run replaces it
 
 
 def _refused(args: list[str], capsys: pytest.CaptureFixture[str]) -> str:
@@ -58,6 +64,14 @@ def test_sim_refuses_a_bad_plot_dir_before_writing_its_csv(
     )
     assert f"--plot {tmp_path / 'taken'}: exists and is not a directory" in err
     assert not csv.exists()
+    (tmp_path / "plots" / MANIFEST_NAME).mkdir(parents=True)
+    err = _refused(
+        ["sim", "--duration", "0.1", "--output", str(csv), "--plot", str(tmp_path / "plots")],
+        capsys,
+    )
+    assert f"{tmp_path / 'plots' / MANIFEST_NAME} is not a file" in err
+    assert not csv.exists()
+    assert [p.name for p in (tmp_path / "plots").iterdir()] == [MANIFEST_NAME]
 
 
 def test_design_refuses_its_output_before_the_search(

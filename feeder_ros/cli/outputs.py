@@ -7,7 +7,7 @@ is worse than one refused at once. The rules, the same for every sub-command:
   its directory must exist;
 * an output **directory** (``--output DIR``, ``--plot DIR``) must not be a file; it is created
   (with its parents) when written, so the nearest existing ancestor must be a directory we may
-  write in.
+  write in; ``DIR/.feeder-outputs``, if there, must be a file (see below).
 
 A directory written again holds only this run's files: a run records the names it wrote in
 ``.feeder-outputs`` there, and the next run into it removes those of them it did not write again
@@ -61,6 +61,13 @@ def check_output_dir(path: Path | None, option: str) -> None:
         raise CommandError(f"{option} '': not a directory name")
     if path.exists() and not path.is_dir():
         raise CommandError(f"{option} {path}: exists and is not a directory")
+    record = path / MANIFEST_NAME
+    if not record.is_symlink() and record.exists() and not record.is_file():
+        # the run would write everything and then fail on its record of what it wrote
+        raise CommandError(
+            f"{option} {path}: {record} is not a file (the name is kept for the record of the"
+            " files a run writes there)"
+        )
     ancestor = path.absolute()
     while not ancestor.exists():
         ancestor = ancestor.parent
