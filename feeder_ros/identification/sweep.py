@@ -30,7 +30,7 @@ import numpy as np
 import numpy.typing as npt
 
 from feeder_ros.csv_cells import csv_cell
-from feeder_ros.identification.rational_fit import distinct_frequencies
+from feeder_ros.identification.rational_fit import FREQUENCY_RESOLUTION_HZ, distinct_frequencies
 from feeder_ros.physics.parameters import is_number
 
 __all__ = [
@@ -230,6 +230,13 @@ class SweepPlan:
             ordered = sorted(set(out))
             if len(ordered) != len(out):
                 raise SweepPlanError(name, tuple(out), "a value appears twice")
+            if name == "frequencies_hz" and distinct_frequencies(ordered)[0].size != len(out):
+                # the fit takes such frequencies as one (rational_fit.FREQUENCY_RESOLUTION_HZ)
+                raise SweepPlanError(
+                    name,
+                    tuple(out),
+                    f"two frequencies within {FREQUENCY_RESOLUTION_HZ:g} Hz are one frequency",
+                )
             return tuple(ordered)
 
         object.__setattr__(

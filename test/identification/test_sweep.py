@@ -126,6 +126,10 @@ def test_plan_from_mapping_sorts_and_maps_amplitude_to_force() -> None:
         ({"amplitudes_percent": [40, 150]}, "amplitudes_percent=150.0: must lie in (0, 100]"),
         ({"part_masses_kg": "-0.01"}, "part_masses_kg=-0.01: must lie in (0, 1000]"),
         ({"frequencies_hz": "20, 20"}, "frequencies_hz=(20.0, 20.0): a value appears twice"),
+        (
+            {"frequencies_hz": [21, 20, 20.000000001]},
+            "frequencies_hz=(21.0, 20.0, 20.000000001): two frequencies within 1e-06 Hz are one",
+        ),
         ({"settle_s": -1}, "settle_s=-1: >= 0 required"),
         ({"window_s": 0}, "window_s=0: > 0 required"),
         ({"window_s": 90}, "window_s=90: exceeds max_window_s"),
@@ -138,6 +142,10 @@ def test_bad_plans_are_refused_naming_the_value(changes: dict[str, object], need
     with pytest.raises(SweepPlanError) as error:
         plan(**changes)
     assert needle in str(error.value)
+
+
+def test_frequencies_just_beyond_the_resolution_are_two() -> None:
+    assert plan(frequencies_hz=[20.0, 20.00001]).frequencies_hz == (20.0, 20.00001)
 
 
 def test_a_plan_needs_the_grid() -> None:
