@@ -215,7 +215,7 @@ class SweepPlan:
 
     def __post_init__(self) -> None:
         def checked(
-            name: str, values: Iterable[float], low: float, high: float
+            name: str, values: Iterable[float], low: float, high: float, frequencies: bool = False
         ) -> tuple[float, ...]:
             out: list[float] = []
             for value in values:
@@ -230,7 +230,7 @@ class SweepPlan:
             ordered = sorted(set(out))
             if len(ordered) != len(out):
                 raise SweepPlanError(name, tuple(out), "a value appears twice")
-            if name == "frequencies_hz" and distinct_frequencies(ordered)[0].size != len(out):
+            if frequencies and distinct_frequencies(ordered)[0].size != len(out):
                 # the fit takes such frequencies as one (rational_fit.FREQUENCY_RESOLUTION_HZ)
                 raise SweepPlanError(
                     name,
@@ -240,7 +240,9 @@ class SweepPlan:
             return tuple(ordered)
 
         object.__setattr__(
-            self, "frequencies_hz", checked("frequencies_hz", self.frequencies_hz, 0.0, 1e4)
+            self,
+            "frequencies_hz",
+            checked("frequencies_hz", self.frequencies_hz, 0.0, 1e4, frequencies=True),
         )
         object.__setattr__(
             self,
