@@ -70,6 +70,10 @@ BETA = 1e6
 ROUNDS = 5
 ENGINE_REPEATS = 7
 MANY_ROUNDS = 5  # the same for the many-parts rows (one run of each kind per round)
+# Issue 3's 1000-parts target, 100x real time, as a ratio to the same run's RK45-default baseline:
+# the issue equates 100x the RK45-default speed with 10,000x real time, so its machine ran that
+# baseline at 100x real time (this machine's speed moves by 2-4x over minutes)
+PARTS_TARGET_VS_BASELINE = 1.0
 
 
 @dataclass(frozen=True)
@@ -315,6 +319,7 @@ def case_table(case: Case, rows: list[Row], reference: Carrier) -> list[str]:
 
 def many_parts(duration_s: float, count: int) -> list[str]:
     params = FeederParameters(drive_amplitude_n=40.0)
+    logistic = params.with_changes(stiffness_model="logistic", logistic_beta_per_m=BETA)
     rng = np.random.default_rng(1)
     positions = np.linspace(0.0, 0.25, count)
     same = tuple(PartSpec(position_m=float(p)) for p in positions)
@@ -324,27 +329,42 @@ def many_parts(duration_s: float, count: int) -> list[str]:
         PartSpec(position_m=float(p), static_friction=float(s), kinetic_friction=float(d))
         for p, s, d in zip(positions, mu_s, mu_d, strict=True)
     )
+    kinds = (("one part type", same), ("all-distinct frictions", distinct))
+    runs = timed_in_turn(
+        [
+            *[
+                (lambda parts=parts: simulate(params, duration_s, 100.0, parts=parts), 1)
+                for _, parts in kinds
+            ],
+            (
+                lambda: solve_logistic_carrier(
+                    logistic, duration_s, options=SolverOptions.ode45_default()
+                ),
+                1,
+            ),
+        ],
+        MANY_ROUNDS,
+    )
+    baseline_wall = runs[-1][1]
     lines = [
         f"#### {count} parts on one carrier (A = 40 N, undamped, {duration_s:g} s, output 100 Hz)",
         "",
         "The run's events are put in one time-ordered list when first read (`EventLog`): 'wall'",
-        "is `simulate()` (best of "
-        f"{MANY_ROUNDS}, the two kinds run in turn), 'events read' the first read of a fresh",
-        "result's events (best of 3), and the last ratio counts both.",
+        f"is `simulate()` (best of {MANY_ROUNDS}; the two kinds and the baseline run in turn), "
+        "'events read' the first read of a fresh result's events (best of 3), and the ratio after",
+        "it counts both. 'vs RK45-default' is the baseline's wall time over the row's: the same",
+        "case's ode45-default run of the logistic carrier alone, timed in turn with the rows, at",
+        f"{duration_s / baseline_wall:.4g}x real time in this run. Issue 3 sets its real-time",
+        "targets on a machine where 100x the RK45-default speed is 10,000x real time, that is",
+        "where this baseline runs at 100x real time (it also quotes about 150x, which would",
+        "ask less): 1000 parts at 100x real time there is a ratio of at least",
+        f"{PARTS_TARGET_VS_BASELINE:g} here.",
         "",
-        "| parts | wall [s] | sim s / wall s | events read [s] | sim s / wall s, events read "
-        "| events | mean part speed [mm/s] | slip fraction |",
-        "| --- | ---: | ---: | ---: | ---: | ---: | ---: | ---: |",
+        "| parts | wall [s] | sim s / wall s | vs RK45-default | events read [s] "
+        "| sim s / wall s, events read | events | mean part speed [mm/s] | slip fraction |",
+        "| --- | ---: | ---: | ---: | ---: | ---: | ---: | ---: | ---: |",
     ]
-    kinds = (("one part type", same), ("all-distinct frictions", distinct))
-    runs = timed_in_turn(
-        [
-            (lambda parts=parts: simulate(params, duration_s, 100.0, parts=parts), 1)
-            for _, parts in kinds
-        ],
-        MANY_ROUNDS,
-    )
-    for (label, parts), (result, wall) in zip(kinds, runs, strict=True):
+    for (label, parts), (result, wall) in zip(kinds, runs, strict=False):
         read = math.inf
         for _ in range(3):
             fresh = simulate(params, duration_s, 100.0, parts=parts)
@@ -352,8 +372,8 @@ def many_parts(duration_s: float, count: int) -> list[str]:
             fresh.events.arrays()
             read = min(read, time.perf_counter() - started)
         lines.append(
-            f"| {label} | {wall:.3f} | {duration_s / wall:.4g} | {read:.3f} | "
-            f"{duration_s / (wall + read):.4g} | {result.event_t_s.size} | "
+            f"| {label} | {wall:.3f} | {duration_s / wall:.4g} | {baseline_wall / wall:.3g} | "
+            f"{read:.3f} | {duration_s / (wall + read):.4g} | {result.event_t_s.size} | "
             f"{float(np.nanmean(result.mean_part_speed_mps())) * 1e3:.4g} | "
             f"{float(np.nanmean(result.slip_fraction())):.3f} |"
         )

@@ -40,6 +40,12 @@ def test_benchmark_quick_run_writes_its_report(tmp_path: Path) -> None:
         "| keeps every change (baseline) |",
     ):
         assert row in text
+    # the many-parts rows carry their ratio to the baseline timed in turn with them
+    header = next(line for line in text.splitlines() if line.startswith("| parts |"))
+    assert "| vs RK45-default |" in header
+    for label in ("| one part type |", "| all-distinct frictions |"):
+        row = next(line for line in text.splitlines() if line.startswith(label))
+        assert float(row.split("|")[4]) > 0.0
     # the engine agrees with the DOP853 reference to round-off in every case table
     engine_rows = [line for line in text.splitlines() if line.startswith("| exact engine")]
     assert len(engine_rows) == 2
