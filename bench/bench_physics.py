@@ -69,7 +69,7 @@ BETA = 1e6
 # engine and the baseline in different phases of it
 ROUNDS = 5
 ENGINE_REPEATS = 7
-MANY_ROUNDS = 5  # the same for the many-parts rows (one run of each kind per round)
+MANY_ROUNDS = 11  # the same for the many-parts rows and their baseline (one run each per round)
 # Issue 3's 1000-parts target, 100x real time, as a ratio to the same run's RK45-default baseline:
 # the issue equates 100x the RK45-default speed with 10,000x real time, so its machine ran that
 # baseline at 100x real time (this machine's speed moves by 2-4x over minutes)
