@@ -6,6 +6,8 @@ import subprocess
 import sys
 from pathlib import Path
 
+import pytest
+
 REPO = Path(__file__).resolve().parents[2]
 
 
@@ -45,7 +47,9 @@ def test_benchmark_quick_run_writes_its_report(tmp_path: Path) -> None:
     assert "| vs RK45-default |" in header
     for label in ("| one part type |", "| all-distinct frictions |"):
         row = next(line for line in text.splitlines() if line.startswith(label))
-        assert float(row.split("|")[4]) > 0.0
+        ratio, at_issue_speed = float(row.split("|")[4]), float(row.split("|")[5])
+        assert ratio > 0.0
+        assert at_issue_speed == pytest.approx(150.0 * ratio, rel=0.01)
     # the engine agrees with the DOP853 reference to round-off in every case table
     engine_rows = [line for line in text.splitlines() if line.startswith("| exact engine")]
     assert len(engine_rows) == 2
