@@ -350,16 +350,19 @@ def many_parts(duration_s: float, count: int) -> list[str]:
     lines = [
         f"#### {count} parts on one carrier (A = 40 N, undamped, {duration_s:g} s, output 100 Hz)",
         "",
-        "The run's events are put in one time-ordered list when first read (`EventLog`): 'wall'",
-        f"is `simulate()` (best of {MANY_ROUNDS}; the two kinds and the baseline run in turn), "
+        "The run's events are put in one time-ordered list when first read (`EventLog`): 'wall' is",
+        f"`simulate()` (best of {MANY_ROUNDS}; the two kinds and the baseline run in turn),",
         "'events read' the first read of a fresh result's events (best of 3), and the ratio after",
         "it counts both. 'vs RK45-default' is the baseline's wall time over the row's: the same",
-        "case's ode45-default run of the logistic carrier alone, timed in turn with the rows, at",
-        f"{duration_s / baseline_wall:.4g}x real time in this run. Issue 3 measured this baseline",
-        f"at about {ISSUE_BASELINE_REAL_TIME:g}x real time on this machine type and asks 1000",
-        f"parts at 100x real time: a ratio of at least {PARTS_TARGET_VS_BASELINE:.3g} here ('at "
-        "the issue's speed' is",
-        f"the ratio times {ISSUE_BASELINE_REAL_TIME:g}).",
+        "case's ode45-default run of the",
+        "logistic carrier alone, timed in turn with the rows, at "
+        f"{duration_s / baseline_wall:.4g}x real time in this run.",
+        f"Issue 3 measured this baseline at about {ISSUE_BASELINE_REAL_TIME:g}x real time on this "
+        "machine type and asks",
+        f"1000 parts at 100x real time: a ratio of at least {PARTS_TARGET_VS_BASELINE:.3g} here "
+        "('at the issue's speed'",
+        f"is the ratio times {ISSUE_BASELINE_REAL_TIME:g}).",
+        "",
         "| parts | wall [s] | sim s / wall s | vs RK45-default | sim s / wall s at the issue's "
         "speed | events read [s] | sim s / wall s, events read | events | mean part speed [mm/s] "
         "| slip fraction |",
