@@ -55,6 +55,7 @@ from feeder_ros.physics.simulation import (  # noqa: E402
     simulate_many,
 )
 from feeder_ros.physics.smooth_model import (  # noqa: E402
+    LogisticCarrier,
     SolverOptions,
     simulate_smooth,
     solve_logistic_carrier,
@@ -202,20 +203,27 @@ def from_result(solver: str, result: SimulationResult, wall: float, note: str = 
     )
 
 
+def logistic_twin(params: FeederParameters) -> FeederParameters:
+    """The same feeder on the logistic model (the RK45 and DOP853 rows run it)."""
+    return params.with_changes(stiffness_model="logistic", logistic_beta_per_m=BETA)
+
+
+def ode45_baseline(params: FeederParameters, duration_s: float) -> LogisticCarrier:
+    """The baseline: ode45's method and default tolerances on the logistic carrier alone."""
+    return solve_logistic_carrier(
+        logistic_twin(params), duration_s, options=SolverOptions.ode45_default()
+    )
+
+
 def run_case(case: Case) -> tuple[list[Row], Carrier]:
     params = case.params
-    logistic = params.with_changes(stiffness_model="logistic", logistic_beta_per_m=BETA)
+    logistic = logistic_twin(params)
     parts = (PartSpec(),)
     rows = []
     (result, wall), (carrier, baseline_wall) = timed_in_turn(
         [
             (lambda: simulate(params, case.duration_s, RATE_HZ, parts=parts), ENGINE_REPEATS),
-            (
-                lambda: solve_logistic_carrier(
-                    logistic, case.duration_s, options=SolverOptions.ode45_default()
-                ),
-                1,
-            ),
+            (lambda: ode45_baseline(params, case.duration_s), 1),
         ],
         ROUNDS,
     )
@@ -320,7 +328,6 @@ def case_table(case: Case, rows: list[Row], reference: Carrier) -> list[str]:
 
 def many_parts(duration_s: float, count: int) -> list[str]:
     params = FeederParameters(drive_amplitude_n=40.0)
-    logistic = params.with_changes(stiffness_model="logistic", logistic_beta_per_m=BETA)
     rng = np.random.default_rng(1)
     positions = np.linspace(0.0, 0.25, count)
     same = tuple(PartSpec(position_m=float(p)) for p in positions)
@@ -337,16 +344,11 @@ def many_parts(duration_s: float, count: int) -> list[str]:
                 (lambda parts=parts: simulate(params, duration_s, 100.0, parts=parts), 1)
                 for _, parts in kinds
             ],
-            (
-                lambda: solve_logistic_carrier(
-                    logistic, duration_s, options=SolverOptions.ode45_default()
-                ),
-                1,
-            ),
+            (lambda: ode45_baseline(params, duration_s), 1),
         ],
         MANY_ROUNDS,
     )
-    baseline_wall = runs[-1][1]
+    *part_runs, (_, baseline_wall) = runs
     lines = [
         f"#### {count} parts on one carrier (A = 40 N, undamped, {duration_s:g} s, output 100 Hz)",
         "",
@@ -368,7 +370,7 @@ def many_parts(duration_s: float, count: int) -> list[str]:
         "| slip fraction |",
         "| --- | ---: | ---: | ---: | ---: | ---: | ---: | ---: | ---: | ---: |",
     ]
-    for (label, parts), (result, wall) in zip(kinds, runs, strict=False):
+    for (label, parts), (result, wall) in zip(kinds, part_runs, strict=True):
         read = math.inf
         for _ in range(3):
             fresh = simulate(params, duration_s, 100.0, parts=parts)
