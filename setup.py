@@ -14,6 +14,7 @@ PACKAGE = "feeder_ros"
 # the same executables under <prefix>/lib/feeder_ros for `ros2 run`.
 CONSOLE_SCRIPTS = [
     "feeder = feeder_ros.cli.main:main",
+    "cell_controller = feeder_ros.examples.cell_controller:main",
     "drive_interface = feeder_ros.nodes.drive_interface:main",
     "manual_drive = feeder_ros.nodes.manual_drive:main",
     "platform_simulator = feeder_ros.nodes.platform_simulator:main",
@@ -35,8 +36,19 @@ setup(
         (f"share/{PACKAGE}/launch", glob("launch/*.launch.py")),
         ("share/ament_index/resource_index/packages", [f"resource/{PACKAGE}"]),
     ],
-    install_requires=["numpy", "scipy>=1.15", "numba", "pyyaml", "mcap", "zstandard", "matplotlib"],
-    extras_require={"test": ["pytest", "pytest-timeout", "rosbags", "ruff", "mypy"]},
+    # requirements.txt's "runtime" and "tests" sections (test/test_dependencies.py checks it)
+    install_requires=[
+        "numpy",
+        "scipy>=1.15",
+        "numba",
+        "pyyaml",
+        "matplotlib",
+        "mcap",
+        "zstandard",
+        "lz4",
+        "pymodbus==3.16.1",
+    ],
+    extras_require={"test": ["pytest", "pytest-timeout", "rosbags", "mcap-ros2-support==0.6.0"]},
     entry_points={"console_scripts": CONSOLE_SCRIPTS},
     zip_safe=False,
 )

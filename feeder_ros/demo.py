@@ -3,9 +3,9 @@
 1. ``feeder cell`` brings up the cell of ``config/cell.yaml``: the platform simulator (damped
    preset, a bowl feeding a part every 2 s), the vehicle estimator, the drive interface and the
    speed monitor, each a process, in namespace ``/demo_cell/feeder_1``.
-2. The example cell controller (``examples/cell_controller.py``) drives it through the public
-   interface only: start, target speed, change of speed, a watchdog trip (its heartbeat stops) and
-   the recovery, stop.
+2. The example cell controller (``feeder_ros.examples.cell_controller``) drives it through the
+   public interface only: start, target speed, change of speed, a watchdog trip (its heartbeat
+   stops) and the recovery, stop.
 3. A probe records what the cell published; the demo prints a summary (speeds achieved against
    the targets, by the estimator, by the part-present sensors and in truth; feed rate; diagnostics
    seen) and writes plots and the data to ``--output``.
@@ -329,7 +329,7 @@ def main(argv: list[str] | None = None) -> int:
             print(f"[demo] the cell is up after {time.monotonic() - started:.1f} s", flush=True)
             controller_code = subprocess.run(
                 [
-                    sys.executable, str(REPO / "examples" / "cell_controller.py"),
+                    sys.executable, "-m", "feeder_ros.examples.cell_controller",
                     "--namespace", args.namespace, "--hold", str(args.hold),
                     "--timeline", str(timeline_file),
                 ],

@@ -22,7 +22,6 @@ from dataclasses import dataclass, field
 from pathlib import Path
 from typing import Any
 
-import rclpy
 import yaml
 from rclpy.duration import Duration
 from rclpy.exceptions import InvalidNamespaceException, InvalidTopicNameException
@@ -43,6 +42,7 @@ from feeder_ros.bag import BagWriter
 from feeder_ros.bag.errors import BagError
 from feeder_ros.nodes import runner
 from feeder_ros.nodes.runner import StopOnShutdown
+from feeder_ros.ros_compat import RosSession
 
 __all__ = [
     "IGNORED_TOPICS",
@@ -259,7 +259,7 @@ def record(
     )
     summary = RecordingSummary(options.output)
     try:
-        with rclpy.init(args=list(args) if args is not None else None) as init:
+        with RosSession(args=list(args) if args is not None else None) as init:
             context = init.context
             node = TopicRecorder(writer, options, summary)
             executor = SingleThreadedExecutor(context=context)

@@ -14,10 +14,11 @@ VENV_BIN = Path(sys.executable).parent
 RECEIVER = r"""
 import json, sys
 import rclpy
+from feeder_ros.ros_compat import RosSession
 from rclpy.qos import QoSProfile, ReliabilityPolicy
 from feeder_ros.msg import DriveCommand
 
-with rclpy.init():
+with RosSession():
     node = rclpy.create_node("smoke_receiver")
     received = []
     qos = QoSProfile(depth=10, reliability=ReliabilityPolicy.RELIABLE)

@@ -34,6 +34,7 @@ from feeder_ros.bag.writer import (
     metadata_yaml,
     write_metadata_file,
 )
+from feeder_ros.ros_compat import ros_distro as ros_distro_in_use
 
 __all__ = ["reindex"]
 
@@ -172,7 +173,7 @@ def reindex(
     bag = Bag(directory, warn=False)
     old = bag.metadata or {}
     custom = {str(k): str(v) for k, v in (old.get("custom_data") or {}).items()}
-    distro = str(old.get("ros_distro") or os.environ.get("ROS_DISTRO", "kilted"))
+    distro = str(old.get("ros_distro") or ros_distro_in_use())
     topics: dict[str, _Topic] = {}
     files: list[_FileStats] = []
     cut_short: list[int] = []

@@ -42,6 +42,7 @@ from feeder_ros.bag.mcap_format import (
 )
 from feeder_ros.bag.msgdef import normalize_type
 from feeder_ros.bag.schemas import ros2msg_schema, type_description_hash
+from feeder_ros.ros_compat import ros_distro as ros_distro_in_use
 
 __all__ = ["COMPRESSIONS", "METADATA_VERSION", "BagWriter", "default_qos_yaml"]
 
@@ -332,7 +333,7 @@ class BagWriter:
         self.chunk_size = chunk_size
         self.max_file_size = max_file_size
         self.max_file_duration_ns = max_file_duration_ns
-        self.ros_distro = ros_distro or os.environ.get("ROS_DISTRO", "kilted")
+        self.ros_distro = ros_distro or ros_distro_in_use()
         self.custom_data = dict(custom_data or {})
         self._topics: dict[str, _Topic] = {}
         self._files: list[_FileStats] = []

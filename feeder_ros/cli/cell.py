@@ -143,11 +143,11 @@ def _stop_all(processes: list[tuple[NodeLaunch, subprocess.Popen[bytes]]]) -> in
 def run_composed(cell: CellDescription, parameters_file: Path, duration: float | None) -> int:
     import importlib
 
-    import rclpy
     from rclpy.executors import ExternalShutdownException
 
     from feeder_ros.nodes.catalog import NODE_MODULES
     from feeder_ros.nodes.runner import StopOnShutdown
+    from feeder_ros.ros_compat import RosSession
 
     modules = {name.rsplit(".", 1)[-1]: name for name in NODE_MODULES}
     classes = {
@@ -155,7 +155,7 @@ def run_composed(cell: CellDescription, parameters_file: Path, duration: float |
         for executable in {launch.executable for launch in cell.nodes}
     }
     try:
-        with rclpy.init() as init, StopOnShutdown(init.context):
+        with RosSession() as init, StopOnShutdown(init.context):
             _spin_composed(cell, classes, parameters_file, duration)
     except (KeyboardInterrupt, ExternalShutdownException):
         # rclpy's handler shuts the context down, then chains to Python's (KeyboardInterrupt),

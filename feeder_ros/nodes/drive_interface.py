@@ -225,9 +225,7 @@ class DriveInterface(LifecycleNode):
     def _now(self) -> float:
         return float(self.get_clock().now().nanoseconds) * 1e-9
 
-    def _refuse_configure_time_changes(
-        self, parameters: list[Parameter[Any]]
-    ) -> SetParametersResult:
+    def _refuse_configure_time_changes(self, parameters: list[Parameter]) -> SetParametersResult:
         """A parameter read at configure changes only while the node is unconfigured: changed
         later, it would not act until the next configure, while drive/state and the diagnostics
         already reported it (a backend, a feedback topic that is not the one in use)."""
@@ -242,7 +240,7 @@ class DriveInterface(LifecycleNode):
                 )
         return SetParametersResult(successful=True)
 
-    def _apply_parameters(self, parameters: list[Parameter[Any]]) -> None:
+    def _apply_parameters(self, parameters: list[Parameter]) -> None:
         changed = {p.name for p in parameters if p.name in PARAMETERS}
         for parameter in parameters:
             if parameter.name in PARAMETERS:
@@ -426,7 +424,7 @@ class DriveInterface(LifecycleNode):
             self._teardown()
         except Exception as error:  # the context may already be shut down: log, go on
             self.get_logger().warning(f"teardown on exit: {error}")
-        super().destroy_node()
+        super().destroy_node()  # type: ignore[no-untyped-call,unused-ignore]  # untyped on Jazzy
 
     # -- the loop ------------------------------------------------------------------------------
     def _publish_command(self, output: DriveOutput) -> None:

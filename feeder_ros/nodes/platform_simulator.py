@@ -248,7 +248,7 @@ class PlatformSimulator(Node):
     def _physics(self) -> FeederParameters:
         return FeederParameters.from_mapping({k: self._values[k] for k in PARAMETER_SPECS})
 
-    def _apply_parameters(self, parameters: list[Parameter[Any]]) -> None:
+    def _apply_parameters(self, parameters: list[Parameter]) -> None:
         changed = {p.name for p in parameters if p.name in PARAMETERS}
         with self._lock:
             for parameter in parameters:

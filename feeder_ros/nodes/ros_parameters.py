@@ -79,12 +79,12 @@ def declare_parameters(
 
 def _fixed_clock(
     use_sim_time: bool,
-) -> Callable[[list[Parameter[Any]]], SetParametersResult]:
+) -> Callable[[list[Parameter]], SetParametersResult]:
     """An on-set-parameters callback refusing a change of ``use_sim_time``: the feeder nodes
     choose their clock at start-up (timers, watchdogs, the simulator's /clock publisher), and a
     switch to sim time with no /clock would freeze a drive's watchdog."""
 
-    def callback(parameters: list[Parameter[Any]]) -> SetParametersResult:
+    def callback(parameters: list[Parameter]) -> SetParametersResult:
         for parameter in parameters:
             if parameter.name == "use_sim_time" and parameter.value != use_sim_time:
                 return SetParametersResult(
@@ -118,7 +118,7 @@ def validator(
     specs: Mapping[str, ParameterSpec],
     check_all: Callable[[dict[str, Any]], object] | None = None,
     current: Callable[[], Mapping[str, Any]] | None = None,
-) -> Callable[[list[Parameter[Any]]], SetParametersResult]:
+) -> Callable[[list[Parameter]], SetParametersResult]:
     """An on-set-parameters callback that validates each value, then the combination.
 
     ``check_all(values)`` sees the current values with the proposed changes applied and raises
@@ -126,7 +126,7 @@ def validator(
     has no side effects: nodes apply accepted changes in a post-set callback.
     """
 
-    def callback(parameters: list[Parameter[Any]]) -> SetParametersResult:
+    def callback(parameters: list[Parameter]) -> SetParametersResult:
         proposed = dict(current()) if current is not None else {}
         try:
             for parameter in parameters:

@@ -16,6 +16,7 @@ from rclpy.executors import ExternalShutdownException, SingleThreadedExecutor
 from rclpy.node import Node
 
 from feeder_ros.physics.parameters import ParameterError
+from feeder_ros.ros_compat import RosSession
 
 #: seconds a node's teardown (node destroyed, context shut down) may take once its spin has
 #: stopped; past that the process ends with status 1 and every thread's stack on stderr. The DDS
@@ -81,7 +82,7 @@ def run_node(make_node: Callable[[], Node], args: Sequence[str] | None = None) -
     """
     argv = list(sys.argv if args is None else args)
     try:
-        initialized = rclpy.init(args=argv)
+        initialized = RosSession(args=argv)
     except RCLError as error:
         # the ROS arguments themselves are bad (an unreadable or malformed --params-file, a bad
         # remapping): rcl names what it could not use

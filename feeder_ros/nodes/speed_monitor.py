@@ -217,7 +217,7 @@ class SpeedMonitorNode(Node):
     def _now(self) -> float:
         return float(self.get_clock().now().nanoseconds) * 1e-9
 
-    def _apply_parameters(self, parameters: list[Parameter[Any]]) -> None:
+    def _apply_parameters(self, parameters: list[Parameter]) -> None:
         for parameter in parameters:
             if parameter.name in PARAMETERS:
                 self._values[parameter.name] = parameter.value

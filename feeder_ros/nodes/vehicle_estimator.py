@@ -313,7 +313,7 @@ class VehicleEstimatorNode(Node):
         self.create_timer(DIAGNOSTICS_PERIOD_S, self._publish_diagnostics)
 
     # -- parameters ----------------------------------------------------------------------------
-    def _apply_parameters(self, parameters: list[Parameter[Any]]) -> None:
+    def _apply_parameters(self, parameters: list[Parameter]) -> None:
         changed = False
         for parameter in parameters:
             if parameter.name in PARAMETERS:

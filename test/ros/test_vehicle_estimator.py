@@ -169,7 +169,9 @@ def test_bad_samples_are_reported_not_averaged_in() -> None:
         "-p", f"qos_overrides.{ns}/imu.subscription.reliability:=reliable",
         "-p", "startup_timeout_s:=4.0",
     ]  # fmt: skip
-    with running(command), probe_node() as node:
+    # the probe first: it subscribes while the node process still starts up (the start-up WARNs
+    # last startup_timeout_s from the node's start; discovery under load can take much of that)
+    with probe_node() as node, running(command):
         estimates: list[VehicleEstimate] = []
         diagnostics: list[DiagnosticArray] = []
         node.create_subscription(VehicleEstimate, f"{ns}/estimate", estimates.append, 100)

@@ -1,4 +1,3 @@
-#!/usr/bin/env python3
 """An example cell controller: drives a feeder only through the suite's public ROS interface.
 
 What a pick-and-place cell's PLC or orchestrator does with a feeder, as a small rclpy program:
@@ -12,9 +11,11 @@ What a pick-and-place cell's PLC or orchestrator does with a feeder, as a small 
 5. stop.
 
 Every step is printed with what the feeder answered; ``--timeline FILE`` writes the steps as JSON
-(the demo uses it for its summary). Run it against a running cell, e.g. ``feeder cell``:
+(the demo uses it for its summary). Installed as the ``cell_controller`` executable; run it against
+a running cell, e.g. ``feeder cell``:
 
-    python examples/cell_controller.py --namespace /demo_cell/feeder_1
+    ros2 run feeder_ros cell_controller --namespace /demo_cell/feeder_1
+    cell_controller --namespace /demo_cell/feeder_1     # in the project venv
 """
 
 from __future__ import annotations
@@ -28,7 +29,6 @@ import time
 from pathlib import Path
 from typing import Any
 
-import rclpy
 from lifecycle_msgs.msg import Transition
 from lifecycle_msgs.srv import ChangeState, GetState
 from rclpy.executors import MultiThreadedExecutor
@@ -38,6 +38,7 @@ from std_msgs.msg import Header
 from std_srvs.srv import Trigger
 
 from feeder_ros.msg import DriveState, SpeedStatus, VehicleEstimate
+from feeder_ros.ros_compat import RosSession
 from feeder_ros.srv import SetTargetSpeed
 
 RELIABLE = QoSProfile(depth=10, reliability=ReliabilityPolicy.RELIABLE)
@@ -162,7 +163,7 @@ class CellController(Node):
             amplitude_percent=round(answer.amplitude_percent, 1),
             predicted_mm_s=round(answer.predicted_speed_mps * 1e3, 2),
         )
-        return answer.result != 2
+        return bool(answer.result != 2)
 
     def watch_speed(self, seconds: float) -> None:
         """Watch speed/status for a while; log what the speed monitor said at the end."""
@@ -231,7 +232,7 @@ def main(argv: list[str] | None = None) -> int:
     parser.add_argument("--hold", type=float, default=12.0, help="seconds at each speed")
     parser.add_argument("--timeline", type=Path, help="write the steps as JSON here")
     args = parser.parse_args(argv)
-    with rclpy.init():
+    with RosSession():
         controller = CellController(args.namespace)
         executor = MultiThreadedExecutor(num_threads=2)
         executor.add_node(controller)
