@@ -74,15 +74,17 @@ $(STAMPS)/package: $(STAMPS)/interfaces setup.py
 		--config-settings editable_mode=compat -e .
 	@touch $@
 
-# numba compiles the exact solver on first use; do it once here (cached next to the sources)
-# so that nodes and tests start in a second instead of paying the compile each time.
-$(STAMPS)/solver-cache: $(STAMPS)/package $(wildcard feeder_ros/physics/*.py)
+# numba compiles the exact solver and the estimator on first use; do it once here (cached next to
+# the sources) so that nodes and tests start in a second instead of paying the compile each time.
+$(STAMPS)/solver-cache: $(STAMPS)/package $(wildcard feeder_ros/physics/*.py feeder_ros/estimation/*.py) \
+		tools/warm_solver_cache.py
 	$(PY) tools/warm_solver_cache.py
 	@touch $@
 
 install: $(STAMPS)/package $(STAMPS)/solver-cache
 
-$(STAMPS)/workspace: $(STAMPS)/interfaces setup.py $(PACKAGE_SOURCES) tools/build_workspace.sh
+$(STAMPS)/workspace: $(STAMPS)/interfaces setup.py $(PACKAGE_SOURCES) tools/build_workspace.sh \
+		tools/warm_solver_cache.py
 	VENV=$(CURDIR)/$(VENV) tools/build_workspace.sh $(CURDIR)/$(WS)
 	source $(WS)/install/local_setup.sh && cd /tmp && $(CURDIR)/$(PY) $(CURDIR)/tools/warm_solver_cache.py
 	@touch $@

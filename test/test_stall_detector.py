@@ -24,6 +24,13 @@ def test_a_late_tick_is_a_stall_and_the_next_one_is_not() -> None:
     assert detector.stalls == 1
 
 
+def test_a_stall_before_the_first_tick_counts_from_the_timer_s_start() -> None:
+    # a node compiling a kernel right after start-up: its first tick comes 2.6 s late
+    assert StallDetector(0.5, start_s=10.0).stalled(12.6)
+    assert not StallDetector(0.5, start_s=10.0).stalled(10.5)
+    assert not StallDetector(0.5).stalled(12.6)  # no start given: the first tick is never late
+
+
 def test_a_node_starved_for_good_judges_every_other_tick() -> None:
     detector = StallDetector(0.5)
     ticks = [detector.stalled(10.0 + 3.0 * k) for k in range(6)]  # every tick 3 s late

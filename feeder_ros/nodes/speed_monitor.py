@@ -212,7 +212,9 @@ class SpeedMonitorNode(Node):
         # a tick late because this process stalled: the inputs sent meanwhile are still on their
         # way; silence counts from the end of the middleware's catch-up (not a false sensor
         # timeout)
-        self._stalls = StallDetector(1.0 / self._values["publish_rate_hz"])
+        self._stalls = StallDetector(
+            1.0 / self._values["publish_rate_hz"], start_s=time.monotonic()
+        )
 
     def _now(self) -> float:
         return float(self.get_clock().now().nanoseconds) * 1e-9

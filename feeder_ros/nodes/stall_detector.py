@@ -28,12 +28,18 @@ MIDDLEWARE_CATCH_UP_S = 3.0
 
 class StallDetector:
     """``stalled(now)`` is true for a tick more than ``period_s + slack_s`` after the last one
-    (the first tick is never late), unless the last tick was reported. A node calls
+    (or after ``start_s``, when the timer was created: a node that stalls before its first tick,
+    e.g. compiling a kernel at start-up, stalled too), unless the last tick was reported. Without
+    ``start_s`` the first tick is never late. A node calls
     :meth:`resuming` at every tick instead: true from a reported stall until ``catch_up_s`` after
     it, while silence must not count."""
 
     def __init__(
-        self, period_s: float, slack_s: float = 0.5, catch_up_s: float = MIDDLEWARE_CATCH_UP_S
+        self,
+        period_s: float,
+        slack_s: float = 0.5,
+        catch_up_s: float = MIDDLEWARE_CATCH_UP_S,
+        start_s: float = math.nan,
     ) -> None:
         if not (math.isfinite(period_s) and period_s > 0.0):
             raise ValueError(f"period_s={period_s!r} must be a positive number of seconds")
@@ -44,7 +50,7 @@ class StallDetector:
         self.period_s = period_s
         self.slack_s = slack_s
         self.catch_up_s = catch_up_s
-        self._last = math.nan
+        self._last = float(start_s)
         self._reported = False
         self._catch_up_end = -math.inf
         self.stalls = 0  #: stalls reported so far (for the node's diagnostics)

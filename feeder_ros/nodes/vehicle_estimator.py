@@ -284,7 +284,7 @@ class VehicleEstimatorNode(Node):
         self._last_input = self.get_clock().now()
         # after this process's own stall (a late diagnostics tick), silence counts from the end
         # of the middleware's catch-up: the samples sent meanwhile are on their way
-        self._stalls = StallDetector(DIAGNOSTICS_PERIOD_S)
+        self._stalls = StallDetector(DIAGNOSTICS_PERIOD_S, start_s=time.monotonic())
         self._listening_since = self._last_input
         self._record: EstimateRecord = self._estimator.last_estimate
         self._axis = _AXES.index(self._values["imu_axis"])
