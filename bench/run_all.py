@@ -18,6 +18,7 @@ HERE = Path(__file__).resolve().parent
 BENCHMARKS = [
     ("Physics core (issue 3)", "bench_physics.py"),
     ("Sensorless estimator against ground truth (issue 4)", "eval_estimator.py"),
+    ("The estimator on mismatched feeders, before and after calibration", "eval_mismatch.py"),
     ("Live nodes over DDS (issue 4)", "bench_live.py"),
     ("Bag decoding and feeder analyze (issue 6)", "bench_bag.py"),
 ]

@@ -33,13 +33,26 @@ from diagnostic_msgs.msg import DiagnosticArray
 from rclpy.context import Context
 from rclpy.executors import MultiThreadedExecutor
 from rclpy.node import Node
-from rclpy.qos import QoSProfile, ReliabilityPolicy
+from rclpy.qos import DurabilityPolicy, QoSProfile, ReliabilityPolicy
 
 from feeder_ros.cell import load_cell
-from feeder_ros.msg import DriveState, PartExit, PartStateArray, SpeedStatus, VehicleEstimate
+from feeder_ros.msg import (
+    DriveState,
+    PartCalibration,
+    PartExit,
+    PartStateArray,
+    SpeedStatus,
+    VehicleEstimate,
+)
 
 REPO = Path(__file__).resolve().parents[1]
 RELIABLE = QoSProfile(depth=1000, reliability=ReliabilityPolicy.RELIABLE)
+LATCHED = QoSProfile(
+    depth=1, reliability=ReliabilityPolicy.RELIABLE, durability=DurabilityPolicy.TRANSIENT_LOCAL
+)
+#: the landing the demo expects: the true part speed within this of the target once the speed
+#: monitor confirmed it (on the mismatched feeder, after the calibration and the drive's trim)
+LANDING_TOLERANCE = 0.03
 LEVELS = ("OK", "WARN", "ERROR", "STALE")
 # how long the cell's nodes may take to appear: a cold start (no bytecode cache, every module
 # read from a slow disk) has taken over 50 s on the project's machine type, a warm one 3 s
@@ -56,7 +69,10 @@ class Recording:
     simulator runs paced, so part stamps, controller steps and these rows share one time base)."""
 
     start: float = field(default_factory=time.time)
-    estimate: list[tuple[float, float, float]] = field(default_factory=list)
+    #: (time, mean speed, its standard uncertainty, confidence)
+    estimate: list[tuple[float, float, float, float]] = field(default_factory=list)
+    #: the part calibration as last published (PartCalibration), and when it first was calibrated
+    calibration: dict[str, Any] = field(default_factory=dict)
     status: list[tuple[float, float, float, float, float, int, int]] = field(default_factory=list)
     drive: list[tuple[float, int, float, float, float]] = field(default_factory=list)
     parts: list[tuple[float, dict[int, float]]] = field(default_factory=list)
@@ -115,7 +131,22 @@ def _probe(namespace: str, recording: Recording) -> tuple[Context, Any, threadin
     r = recording
 
     def on_estimate(m: VehicleEstimate) -> None:
-        r.estimate.append((r.now(), m.mean_speed_mps, m.mean_speed_confidence))
+        r.estimate.append(
+            (r.now(), m.mean_speed_mps, m.mean_speed_uncertainty_mps, m.mean_speed_confidence)
+        )
+
+    def on_calibration(m: PartCalibration) -> None:
+        if m.state != PartCalibration.STATE_NOMINAL and "first_at" not in r.calibration:
+            r.calibration["first_at"] = r.now()
+        r.calibration.update(
+            state=("nominal", "calibrating", "calibrated")[min(m.state, 2)],
+            static_friction=round(m.static_friction, 4),
+            kinetic_friction=round(m.kinetic_friction, 4),
+            accelerometer_gain=round(m.accelerometer_gain, 4),
+            transits_used=m.transits_used,
+            measurements_refused=m.measurements_refused,
+            operating_points=m.operating_points,
+        )
 
     def on_status(m: SpeedStatus) -> None:
         r.status.append(
@@ -147,6 +178,7 @@ def _probe(namespace: str, recording: Recording) -> tuple[Context, Any, threadin
 
     subscribe = node.create_subscription
     subscribe(VehicleEstimate, f"{namespace}/estimate", r.add(on_estimate), RELIABLE)
+    subscribe(PartCalibration, f"{namespace}/calibration", r.add(on_calibration), LATCHED)
     subscribe(SpeedStatus, f"{namespace}/speed/status", r.add(on_status), RELIABLE)
     subscribe(DriveState, f"{namespace}/drive/state", r.add(on_drive), RELIABLE)
     subscribe(PartStateArray, f"{namespace}/parts/state", r.add(on_parts), RELIABLE)
@@ -183,6 +215,7 @@ def summarise(recording: Recording, timeline: list[dict[str, Any]], out: Path) -
                 "at_s": round(entry["wall_s"] - recording.start, 1),
                 "target_mm_s": entry.get("target_mm_s"),
                 "estimated_mm_s": entry.get("estimated_mm_s"),
+                "estimate_uncertainty_mm_s": entry.get("estimate_uncertainty_mm_s"),
                 "transit_mm_s": entry.get("transit_mm_s"),
                 "true_mm_s": None if math.isnan(truth) else round(truth * 1e3, 2),
                 "feed_rate_ppm": entry.get("feed_rate_ppm"),
@@ -190,8 +223,12 @@ def summarise(recording: Recording, timeline: list[dict[str, Any]], out: Path) -
             }
         )
     watchdog = next((e for e in timeline if e["step"] == "watchdog"), {})
+    calibration = dict(recording.calibration)
+    if "first_at" in calibration:
+        calibration["first_at_s"] = round(calibration.pop("first_at") - recording.start, 1)
     summary = {
         "phases": phases,
+        "calibration": calibration,
         "watchdog": watchdog,
         "parts_fed": len(recording.exits),
         "diagnostics": {
@@ -242,6 +279,17 @@ def problems(
             found.append(f"{where}: no speed estimate")
         if not str(phase["monitor"]).startswith("OK "):
             found.append(f"{where}: the speed monitor said {phase['monitor']}")
+        true, target = phase["true_mm_s"], phase["target_mm_s"]
+        if true is None or target is None:
+            found.append(f"{where}: no ground truth recorded")
+        elif abs(true - target) > LANDING_TOLERANCE * abs(target):
+            off = 100 * (true / target - 1)
+            found.append(
+                f"{where}: the part ran at {true:g} mm/s in truth, {off:+.1f} % off the target "
+                f"(within {100 * LANDING_TOLERANCE:g} % expected)"
+            )
+    if summary["calibration"].get("transits_used", 0) == 0:
+        found.append("the part model was not calibrated from the sensor transits")
     if summary["parts_fed"] == 0:
         found.append("no part left the track")
     if summary["watchdog"].get("tripped") is not True:
@@ -267,6 +315,12 @@ def plot(recording: Recording, out: Path) -> list[Path]:
         top.plot(s[:, 0] - t0, s[:, 1] * 1e3, "k--", label="target")
         top.plot(s[:, 0] - t0, s[:, 2] * 1e3, label="estimator (sensorless)")
         top.plot(s[:, 0] - t0, s[:, 3] * 1e3, ".", label="sensor transit (8.5 cm)")
+    if recording.estimate:
+        e = np.array(recording.estimate)
+        top.fill_between(
+            e[:, 0] - t0, (e[:, 1] - 2 * e[:, 2]) * 1e3, (e[:, 1] + 2 * e[:, 2]) * 1e3,
+            alpha=0.25, label="estimate +- 2 sigma (95 %)",
+        )  # fmt: skip
     if len(recording.parts) > 20:
         t = np.array([row[0] for row in recording.parts])
         truth = np.array(
@@ -303,7 +357,12 @@ def main(argv: list[str] | None = None) -> int:
     parser.add_argument("--output", type=Path, default=Path("demo-output"))
     parser.add_argument("--cell", type=Path, default=REPO / "config" / "cell.yaml")
     parser.add_argument("--namespace", default="/demo_cell/feeder_1")
-    parser.add_argument("--hold", type=float, default=12.0, help="seconds at each target speed")
+    parser.add_argument(
+        "--hold", type=float, default=4.0, help="seconds at each target speed once confirmed"
+    )
+    parser.add_argument(
+        "--timeout", type=float, default=45.0, help="at most this long to confirm each target"
+    )
     args = parser.parse_args(argv)
     args.output.mkdir(parents=True, exist_ok=True)
     os.environ.setdefault("ROS_AUTOMATIC_DISCOVERY_RANGE", "LOCALHOST")
@@ -331,7 +390,7 @@ def main(argv: list[str] | None = None) -> int:
                 [
                     sys.executable, "-m", "feeder_ros.examples.cell_controller",
                     "--namespace", args.namespace, "--hold", str(args.hold),
-                    "--timeline", str(timeline_file),
+                    "--timeout", str(args.timeout), "--timeline", str(timeline_file),
                 ],
                 timeout=600,
             ).returncode  # fmt: skip
@@ -369,6 +428,14 @@ def main(argv: list[str] | None = None) -> int:
         f"state={watchdog.get('state')} reason={watchdog.get('reason')!r}"
     )
     print(f"parts fed: {summary['parts_fed']}")
+    cal = summary["calibration"]
+    print(
+        f"part model: {cal.get('state', 'not heard')} after {cal.get('transits_used', 0)} "
+        f"transits at {cal.get('operating_points', 0)} operating point(s) (first at "
+        f"{cal.get('first_at_s', '-')} s): mu_s {cal.get('static_friction', '-')}, mu_d "
+        f"{cal.get('kinetic_friction', '-')}, accelerometer gain "
+        f"{cal.get('accelerometer_gain', '-')} (the simulated plant: 0.245, 0.088, 1.02)"
+    )
     print("diagnostics seen until the cell stopped (worst level per status):")
     for name, level in sorted(summary["diagnostics"].items()):
         message, at = summary["diagnostic_messages"][name], summary["diagnostic_at_s"][name]

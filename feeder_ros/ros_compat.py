@@ -8,6 +8,8 @@ free of version checks:
   (``InitContextManager``); Jazzy's returns ``None`` and leaves the shutdown to the caller.
 - :func:`ros_distro` names the distribution the installed rclpy belongs to, without importing it
   (the ROS-free bag writer records it in ``metadata.yaml``).
+- :data:`AnyParameter` is the type of an ``rclpy.parameter.Parameter`` of any value for the type
+  checker: Kilted's ``Parameter`` is generic (``Parameter[Any]``), Jazzy's is not.
 """
 
 from __future__ import annotations
@@ -18,8 +20,14 @@ from types import TracebackType
 from typing import TYPE_CHECKING, Any
 
 if TYPE_CHECKING:
+    from typing import TypeAlias
+
     from rclpy.context import Context
+    from rclpy.parameter import Parameter
     from rclpy.signals import SignalHandlerOptions
+
+    # Kilted: generic; Jazzy: not (there the ignore applies and the alias is plain Parameter)
+    AnyParameter: TypeAlias = Parameter[Any]  # type: ignore[type-arg,unused-ignore]
 
 #: rclpy's major version in each supported distribution (ros/rclpy's branches).
 RCLPY_MAJOR_BY_DISTRO = {"jazzy": 7, "kilted": 9}

@@ -116,7 +116,7 @@ def test_no_design_in_set_s_exits_1(tmp_path: Path, capsys: pytest.CaptureFixtur
         (["--target-speed", "0.01"], "--target-speed is for --objective min-force"),
         (["--set", "drive_frequency_hz=30"], "drive_frequency_hz is searched"),
         (["--set", "static_friction=-1"], "static_friction=-1.0 must be > 0"),
-        (["--preset", "gentle"], "presets in this file: realistic"),
+        (["--preset", "gentle"], "presets in this file: mismatched, realistic"),
         (["--space", "/nonexistent/design.yaml"], "--space /nonexistent/design.yaml: no such file"),
     ],
 )

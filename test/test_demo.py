@@ -39,9 +39,16 @@ def _run(
     tripped: bool = True,
     exits: int = 3,
     diagnostics: tuple[tuple[str, int, str], ...] = (),
+    truths: tuple[float, float] = (15.2, 7.9),
+    transits: int = 6,
 ) -> dict[str, Any]:
     recording = Recording(start=1000.0)
     recording.exits = [1010.0 + k for k in range(exits)]
+    # the simulator's part positions: each phase's last 4 s at its true speed [mm/s]
+    for part, (end, speed) in enumerate(zip((1019.6, 1031.6), truths, strict=True)):
+        recording.parts += [(end - 4.0, {part: 0.0}), (end, {part: 4.0 * speed * 1e-3})]
+    if transits:
+        recording.calibration.update(first_at=1012.0, state="calibrating", transits_used=transits)
     seen: list[str] = []  # statuses noted so far: the k-th at 5 + k s
     for name, level, message in (
         (DRIVE, 0, "running"),
@@ -73,6 +80,25 @@ def test_a_working_cell_passes_and_its_summary_keeps_the_worst_messages(tmp_path
         ESTIMATE: "waiting for the first accelerometer sample (0.9 s since start)",
     }
     assert written["diagnostic_at_s"] == {DRIVE: 6.0, ESTIMATE: 9.0}  # since the demo's start
+    assert [phase["true_mm_s"] for phase in written["phases"]] == [15.2, 7.9]
+    assert written["calibration"] == {
+        "state": "calibrating",
+        "transits_used": 6,
+        "first_at_s": 12.0,
+    }
+
+
+def test_a_speed_off_target_in_truth_or_no_calibration_fails(tmp_path: Path) -> None:
+    """On the mismatched feeder the demo shows the landing: the truth within 3 % of the target
+    once the monitor confirmed it, and a part model calibrated from the transits."""
+    off = _run(tmp_path, truths=(15.2, 8.3))  # 8 mm/s asked, 3.75 % fast in truth
+    assert problems(off, 0, 0, DRIVE) == [
+        "phase ending at 31.6 s (target 8.0 mm/s): the part ran at 8.3 mm/s in truth, +3.8 % off "
+        "the target (within 3 % expected)"
+    ]
+    assert problems(_run(tmp_path, transits=0), 0, 0, DRIVE) == [
+        "the part model was not calibrated from the sensor transits"
+    ]
 
 
 def test_a_cell_whose_simulator_never_came_up_fails_with_every_reason(tmp_path: Path) -> None:
@@ -124,6 +150,7 @@ def test_each_missing_piece_is_named_alone(tmp_path: Path) -> None:
     ]
     assert problems(summarise(Recording(), [], tmp_path), 0, 0, DRIVE) == [
         "no target-speed phase was recorded (the controller never watched a speed)",
+        "the part model was not calibrated from the sensor transits",
         "no part left the track",
         "the watchdog did not trip when the controller's heartbeat stopped",
     ]

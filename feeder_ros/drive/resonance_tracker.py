@@ -88,8 +88,11 @@ class TrackerSettings:
     """Tuning of :class:`ResonanceTracker` (SI units, amplitude in % of full scale)."""
 
     dither_hz: float = 0.3  #: frequency offset of each half-period from the centre
-    dither_period_s: float = 4.0  #: one cycle: a half-period on each side of the centre
-    settle_s: float = 1.2  #: discarded at the start of each half-period
+    #: one cycle: a half-period on each side of the centre. The sensorless estimator publishes a
+    #: mean speed only once its carrier fit has converged at the new setting and half its window
+    #: lies after that (about 2.2 s with its defaults): a half-period must be longer
+    dither_period_s: float = 8.0
+    settle_s: float = 2.6  #: discarded at the start of each half-period
     gain_hz2: float = 1.0  #: centre step per unit relative gradient (1/Hz): Hz^2
     max_step_hz: float = 0.5  #: largest centre step per cycle
     amplitude_kp_percent: float = 5.0  #: amplitude per unit change of relative speed error

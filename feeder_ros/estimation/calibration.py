@@ -3,27 +3,28 @@
 A cell measures part speeds in length and time: transits between part-present sensors a known
 distance apart (the paper's 8.5 cm timing), parts leaving the end of the track, an operator with a
 stopwatch. Each such measurement, taken while the carrier ran at one steady operating point, is one
-equation ``y = h(theta; carrier) + e``: the steady mean speed the part model predicts on that
-operating point's carrier model (:func:`~feeder_ros.estimation.part_belief.predict_speed`) plus
-the measurement's error. :class:`Calibrator` folds measurements one at a time into the Gaussian
-belief over ``theta = (ln L, ln D, ln k)`` (:class:`~feeder_ros.estimation.part_belief.PartBelief`):
-a Gauss-Newton iteration on the prior (the current belief) and the new equation, whose curvature at
-the optimum is the new covariance (a Laplace, or iterated-EKF, update).
+equation ``y = h(theta; carrier) + e``: the steady mean speed a part with ``theta`` reaches on that
+operating point's carrier model (``CarrierRun``) plus the measurement's error. :class:`Calibrator`
+holds the posterior over ``theta = (ln L, ln D, ln k)`` as weighted samples (importance sampling
+from the prior, redrawn around the posterior as it narrows; see the class) and hands the
+estimator a :class:`~feeder_ros.estimation.part_belief.PartBelief`. Samples, not a linearisation:
+``h`` jumps where a carrier peak grazes the stick limit, and a Gauss-Newton fit sat on such an
+edge with a covariance far too small (tried; ``docs/model.md`` section 12.4).
 
-What the data identify (``docs/model.md``, section 8): one operating point gives one equation, a
-curve in the (L, D) plane; the covariance keeps the other direction as uncertain as before.
-Operating points with different slip patterns constrain different combinations, so two or more
-fix L and D. A point where the part never slips has ``h`` independent of L and D: it carries no
-friction information, and the update leaves the belief unchanged. ``k`` is told apart from
-friction only weakly; it stays near its prior unless the points disagree with a pure friction
-change.
+What the data identify: one operating point gives one equation, a curve in the (L, D) plane; the
+posterior stays as wide as before along it, and other operating points keep much of their
+uncertainty. Operating points with different slip patterns constrain different combinations, so
+two or more fix L and D. A point where the part never slips has ``h = 0`` for every plausible
+part: it carries no friction information (a speed measured there is an outlier). ``k`` is told
+apart from friction only weakly; it stays near its prior unless the points disagree with a pure
+friction change.
 
 Refused (the belief does not change, the reason names the value): a speed that is not finite, not
 positive, or faster than the carrier itself can carry a part (its peak velocity); an uncertainty
-that is not finite and positive; an update whose result would give ``mu_d > mu_s``, a friction
-coefficient outside ``(0, 2]`` or a gain outside ``[0.5, 2]``; a measurement more than
-``outlier_sigma`` standard deviations from the prediction (a wrong sensor spacing, a part that
-jammed).
+that is not finite and positive; a measurement more than ``outlier_sigma`` standard deviations
+from the prediction (a wrong sensor spacing, a part that jammed); an update after which most of
+the posterior wants ``mu_d >= mu_s``, or whose mean has a friction coefficient above 2 or a gain
+outside ``[0.5, 2]``.
 """
 
 from __future__ import annotations
@@ -33,10 +34,13 @@ from dataclasses import dataclass
 
 import numpy as np
 import numpy.typing as npt
-from scipy.optimize import least_squares
 
 from feeder_ros.estimation.carrier_velocity import HarmonicFit
-from feeder_ros.estimation.part_belief import CarrierRun, PartBelief, predict_speed
+from feeder_ros.estimation.part_belief import (
+    CarrierRun,
+    PartBelief,
+    gaussian_particles,
+)
 from feeder_ros.physics.parameters import ParameterError, is_number
 
 __all__ = ["CalibrationResult", "Calibrator", "SpeedMeasurement"]
@@ -71,9 +75,11 @@ class CalibrationResult:
 
 @dataclass
 class _Point:
-    """The measurements at one operating point: their weighted mean and the latest carrier model."""
+    """The measurements at one operating point: their weighted mean, the latest carrier model
+    (sampled) and every particle's predicted speed on it."""
 
-    run: CarrierRun  #: the latest carrier model of the point, sampled
+    run: CarrierRun
+    speeds: F64  #: per particle [true m/s]
     weight: float = 0.0  #: sum of 1/sigma^2
     weighted_sum: float = 0.0  #: sum of y/sigma^2
     count: int = 0
@@ -82,22 +88,25 @@ class _Point:
     def speed_mps(self) -> float:
         return self.weighted_sum / self.weight
 
-    def uncertainty_mps(self, systematic: float) -> float:
-        """Of the mean: the measurements' own spread averages down, the model's systematic error
-        (``systematic`` relative) does not."""
-        return math.hypot(1.0 / math.sqrt(self.weight), systematic * abs(self.speed_mps))
+    def log_likelihood(self, systematic: float) -> F64:
+        """Of each particle: the measurements' own spread averages down, the part model's
+        systematic error (``systematic`` relative) does not."""
+        sigma2 = 1.0 / self.weight + (systematic * self.speed_mps) ** 2
+        return np.asarray(-0.5 * (self.speed_mps - self.speeds) ** 2 / sigma2, np.float64)
 
 
 class Calibrator:
     """Estimates the part model from speed measurements (see the module docstring).
 
-    Measurements are grouped by operating point (drive frequency and amplitude); each point is one
-    equation, its measured speed the weighted mean of its measurements with their uncertainty
-    (plus ``systematic`` relative: the part model's own error at the true values, which no number
-    of transits averages away). The belief is the maximum a posteriori estimate over every point
-    and the prior (``scipy.optimize.least_squares`` on the whitened residuals, started from the
-    current estimate and from the prior mean), its covariance the inverse Gauss-Newton curvature
-    there (a Laplace approximation). ``dt_s``: the sample interval the part model is run at.
+    The posterior is carried by ``particles`` samples of ``theta`` with importance weights: drawn
+    from the prior (scrambled Sobol, deterministic), weighted by the likelihood of every operating
+    point, and rejuvenated (resampled, then moved by Metropolis steps on the posterior) whenever
+    the weights concentrate on fewer than half of them. Measurements are grouped by operating
+    point (drive frequency and amplitude); each point is one equation, its measured speed the
+    weighted mean of its measurements (uncertainty: theirs averaged down, plus ``systematic``
+    relative, the part model's own error at the true values). Each particle is run once per point
+    (``settle_periods`` + ``periods`` response periods at ``dt_s``), so a transit at a known point
+    costs only a re-weighting; a new point or a redraw runs every particle.
     """
 
     def __init__(
@@ -106,6 +115,7 @@ class Calibrator:
         dt_s: float = 1e-3,
         outlier_sigma: float = 5.0,
         systematic: float = 0.005,
+        particles: int = 256,
         settle_periods: int = 6,
         periods: int = 12,
     ) -> None:
@@ -115,13 +125,14 @@ class Calibrator:
             raise ParameterError(f"outlier_sigma={outlier_sigma!r} must be > 0")
         if not (is_number(systematic) and 0.0 <= systematic < 1.0):
             raise ParameterError(f"systematic={systematic!r} must be in [0, 1)")
-        self._prior = prior
-        self._belief = prior
+        if not (isinstance(particles, int) and particles >= 16 and not particles & (particles - 1)):
+            raise ParameterError(f"particles={particles!r} must be a power of two >= 16")
         self._dt = float(dt_s)
         self._outlier = float(outlier_sigma)
         self._systematic = float(systematic)
+        self._count = particles
         self._runs = (int(settle_periods), int(periods))
-        self._points: dict[tuple[float, float], _Point] = {}
+        self.restore(prior)
 
     @property
     def belief(self) -> PartBelief:
@@ -133,21 +144,41 @@ class Calibrator:
 
     def reset(self) -> None:
         """Back to the prior: every measurement forgotten."""
-        self._belief = self._prior
-        self._points.clear()
+        self.restore(self._prior)
 
     def restore(self, belief: PartBelief) -> None:
-        """Continue from a stored belief (read back from a calibration file): it becomes the prior
-        of the measurements that follow."""
+        """Start from ``belief`` (the prior, or one read back from a calibration file): it becomes
+        the prior of the measurements that follow."""
         self._prior = belief
         self._belief = belief
-        self._points.clear()
+        self._points: dict[tuple[float, float], _Point] = {}
+        self._prior_info = _information(belief.covariance)
+        self._draw(belief.mean, belief.covariance, seed=0)
+
+    def _draw(self, mean: F64, cov: F64, seed: int) -> None:
+        """New particles from N(mean, cov); their proposal and prior log densities."""
+        theta = gaussian_particles(mean, cov, self._count, seed)
+        self._theta = theta
+        self._log_q = _log_normal(theta, mean, _information(cov))
+        self._log_p = _log_normal(theta, self._prior.mean, self._prior_info)
+        for point in self._points.values():
+            point.speeds = point.run.speeds(self._prior, theta)
+
+    def _weights(self) -> F64:
+        log_w = self._log_p - self._log_q
+        for point in self._points.values():
+            log_w = log_w + point.log_likelihood(self._systematic)
+        w = np.exp(log_w - np.max(log_w))
+        return np.asarray(w / np.sum(w), np.float64)
+
+    def _predictive(self, speeds: F64, weights: F64) -> tuple[float, float]:
+        mean = float(np.dot(weights, speeds))
+        return mean, math.sqrt(max(float(np.dot(weights, (speeds - mean) ** 2)), 0.0))
 
     def predict(self, fit: HarmonicFit) -> tuple[float, float]:
-        """(speed, standard uncertainty) [m/s] the current belief predicts on ``fit``."""
-        settle, periods = self._runs
-        pred = predict_speed(fit, self._belief, self._dt, settle, periods)
-        return pred.speed_mps, pred.uncertainty_mps
+        """(speed, standard uncertainty) [m/s] the current posterior predicts on ``fit``."""
+        run = CarrierRun.of(fit, self._dt, *self._runs)
+        return self._predictive(run.speeds(self._prior, self._theta), self._weights())
 
     def add(self, measurement: SpeedMeasurement) -> CalibrationResult:
         belief = self._belief
@@ -163,7 +194,13 @@ class Calibrator:
                 f"peak velocity {peak / belief.gain:.6g} m/s: no part can move that fast",
                 belief,
             )
-        predicted, sigma = self.predict(fit)
+        key = (round(measurement.drive[0], 6), round(measurement.drive[1], 6))
+        if not all(math.isfinite(x) for x in key):
+            key = (float(len(self._points)) + 0.5, math.inf)  # unnamed point: its own equation
+        previous = self._points.get(key)
+        run = CarrierRun.of(fit, self._dt, *self._runs)
+        speeds = run.speeds(self._prior, self._theta)
+        predicted, sigma = self._predictive(speeds, self._weights())
         spread = math.hypot(sigma, measurement.uncertainty_mps, self._systematic * predicted)
         off = abs(measurement.speed_mps - predicted) / spread
         if off > self._outlier:
@@ -176,32 +213,27 @@ class Calibrator:
                 predicted,
                 sigma,
             )
-        key = (round(measurement.drive[0], 6), round(measurement.drive[1], 6))
-        if not all(math.isfinite(x) for x in key):
-            key = (float(len(self._points)) + 0.5, math.inf)  # unnamed point: its own equation
-        previous = self._points.get(key)
-        run = CarrierRun.of(fit, self._dt, *self._runs)
-        point = (
-            _Point(run)
-            if previous is None
-            else _Point(run, previous.weight, previous.weighted_sum, previous.count)
-        )
+        saved = (self._theta, self._log_q, self._log_p, dict(self._points))
+        saved_speeds = {k: p.speeds for k, p in self._points.items()}
+        point = _Point(run, speeds)
+        if previous is not None:
+            point.weight, point.weighted_sum = previous.weight, previous.weighted_sum
+            point.count = previous.count
         w = 1.0 / measurement.uncertainty_mps**2
         point.weight += w
         point.weighted_sum += w * measurement.speed_mps
         point.count += 1
         self._points[key] = point
-        mean, cov = self._solve()
-        problem = _check_theta(mean, belief)
+        weights = self._refined_weights()
+        problem = _check_posterior(self._theta, weights, belief)
         if problem:
-            if previous is None:
-                del self._points[key]
-            else:
-                self._points[key] = previous
+            self._theta, self._log_q, self._log_p, self._points = saved
+            for k, p in self._points.items():
+                p.speeds = saved_speeds[k]
             return CalibrationResult(False, problem, belief, predicted, sigma)
-        self._belief = belief.with_values(
-            mean,
-            cov,
+        self._belief = belief.updated(
+            (self._theta, weights),
+            self._estimate(weights),
             transits=belief.transits + (measurement.source == "transit"),
             operator_speeds=belief.operator_speeds + (measurement.source == "operator"),
             points=tuple(k for k in self._points if math.isfinite(k[1])),
@@ -217,31 +249,79 @@ class Calibrator:
             sigma,
         )
 
-    def _solve(self) -> tuple[F64, F64]:
-        """The MAP estimate over the points and the prior, and its Laplace covariance."""
-        prior = self._prior
-        root = np.linalg.cholesky(np.linalg.inv(prior.covariance))  # info = R R^T
+    def _refined_weights(self) -> F64:
+        """The posterior weights; when fewer than half of the particles carry them, the set is
+        rejuvenated first (resample-move: see :meth:`_rejuvenate`) and the weights are equal."""
+        weights = self._weights()
+        if 1.0 / float(np.sum(weights**2)) >= self._count / 2.0:
+            return weights
+        self._rejuvenate(weights)
+        return self._weights()
+
+    def _rejuvenate(self, weights: F64, moves: int = 6) -> None:
+        """Resample the particles by their weights, then move each by a few Metropolis steps that
+        leave the posterior invariant (a random walk scaled to the posterior's own spread,
+        floored at 0.2 %): duplicates spread out again, along a curved posterior too, and the set
+        stays a sample of the posterior however narrow it gets."""
+        count = self._count
+        positions = (np.arange(count) + 0.5) / count
+        index = np.minimum(np.searchsorted(np.cumsum(weights), positions), count - 1)
+        theta = self._theta[index].copy()
+        mean = weights @ self._theta
+        centred = self._theta - mean
+        cov = (centred * weights[:, None]).T @ centred + np.diag(np.full(3, 0.002**2))
+        step = np.linalg.cholesky(0.5 * (cov + cov.T)) * (2.38 / math.sqrt(3.0))
         points = list(self._points.values())
-        ys = np.array([p.speed_mps for p in points])
-        sig = np.array([p.uncertainty_mps(self._systematic) for p in points])
+        speeds = [p.speeds[index].copy() for p in points]
+        log_target = self._log_posterior(theta, speeds)
+        rng = np.random.default_rng(len(points) * 7919 + sum(p.count for p in points))
+        for _ in range(moves):
+            proposal = theta + rng.standard_normal((count, 3)) @ step.T
+            inside = proposal[:, 1] < proposal[:, 0] - 1e-3  # mu_d < mu_s
+            proposal[~inside] = theta[~inside]
+            new_speeds = [p.run.speeds(self._prior, proposal) for p in points]
+            new_target = self._log_posterior(proposal, new_speeds)
+            accept = inside & (np.log(rng.random(count)) < new_target - log_target)
+            theta[accept] = proposal[accept]
+            log_target[accept] = new_target[accept]
+            for old, new in zip(speeds, new_speeds, strict=True):
+                old[accept] = new[accept]
+        self._theta = theta
+        self._log_p = _log_normal(theta, self._prior.mean, self._prior_info)
+        # drawn from the posterior: their density is the posterior's (up to a constant), so the
+        # weights of later measurements are their likelihood alone
+        self._log_q = log_target
+        for point, values in zip(points, speeds, strict=True):
+            point.speeds = values
 
-        def residuals(theta: F64) -> F64:
-            k = math.exp(float(theta[2]))
-            part = prior.measured_part(theta)
-            h = [p.run.mean_speed(part) / k for p in points]
-            return np.concatenate(((ys - np.array(h)) / sig, root.T @ (theta - prior.mean)))
+    def _estimate(self, weights: F64) -> F64:
+        """The posterior mean if it fits the measurements about as well as the best particle (a
+        parameter the data leave free then stays at its mean, not at a random particle's value),
+        else the best particle."""
+        points = list(self._points.values())
+        mean = weights @ self._theta
+        best = self._theta[int(np.argmax(weights))]
+        candidates = np.vstack((mean, best))
+        speeds = [p.run.speeds(self._prior, candidates) for p in points]
+        log = self._log_posterior(candidates, speeds)
+        return np.asarray(mean if log[0] >= log[1] - 2.0 else best, np.float64)
 
-        best = None
-        for start in (self._belief.mean, prior.mean):
-            result = least_squares(
-                residuals, start, diff_step=np.full(3, 0.01), x_scale=prior.std, max_nfev=60
-            )
-            if best is None or result.cost < best.cost:
-                best = result
-        assert best is not None
-        J = np.asarray(best.jac, np.float64)
-        cov = np.linalg.inv(J.T @ J)
-        return np.asarray(best.x, np.float64), np.asarray(0.5 * (cov + cov.T), np.float64)
+    def _log_posterior(self, theta: F64, speeds: list[F64]) -> F64:
+        log = _log_normal(theta, self._prior.mean, self._prior_info)
+        for point, values in zip(self._points.values(), speeds, strict=True):
+            sigma2 = 1.0 / point.weight + (self._systematic * point.speed_mps) ** 2
+            log = log - 0.5 * (point.speed_mps - values) ** 2 / sigma2
+        return np.asarray(log, np.float64)
+
+
+def _information(cov: F64) -> F64:
+    """The (pseudo-)inverse of a covariance: a parameter known exactly has no density term."""
+    return np.asarray(np.linalg.pinv(cov, hermitian=True), np.float64)
+
+
+def _log_normal(theta: F64, mean: F64, info: F64) -> F64:
+    d = theta - mean
+    return np.asarray(-0.5 * np.einsum("ij,jk,ik->i", d, info, d), np.float64)
 
 
 def _one_period(fit: HarmonicFit, dt_s: float) -> F64:
@@ -263,19 +343,22 @@ def _check_measurement(m: SpeedMeasurement) -> str:
     return ""
 
 
-def _check_theta(theta: F64, belief: PartBelief) -> str:
-    if not np.all(np.isfinite(theta)):
-        return f"the fit diverged (theta={theta.tolist()})"
-    ln_l, ln_d, ln_k = (float(x) for x in theta)
-    g_kappa = belief.nominal.gravity_mps2 * belief.nominal.friction_multiplier
-    if ln_d > ln_l:
+def _check_posterior(theta: F64, weights: F64, belief: PartBelief) -> str:
+    mean = weights @ theta
+    if not np.all(np.isfinite(mean)):
+        return f"the calibration diverged (theta={mean.tolist()})"
+    ln_l, ln_d, ln_k = (float(x) for x in mean)
+    at_cap = float(np.sum(weights[theta[:, 1] >= theta[:, 0] - 0.02]))
+    if at_cap > 0.5:  # the part model caps D below L: most of the weight pushing at the cap
         return (
-            f"the fit would give mu_d > mu_s (slip deceleration {math.exp(ln_d):.4g} > stick "
-            f"limit {math.exp(ln_l):.4g} m/s^2): not used"
+            f"the fit would give mu_d >= mu_s ({100 * at_cap:.0f} % of the posterior at the "
+            f"limit; slip deceleration {math.exp(ln_d):.4g}, stick limit {math.exp(ln_l):.4g} "
+            "m/s^2): not used"
         )
     gain = math.exp(ln_k)
     if not GAIN_RANGE[0] <= gain <= GAIN_RANGE[1]:
         return f"the fit would give an accelerometer gain of {gain:.4g}, outside {GAIN_RANGE}"
+    g_kappa = belief.nominal.gravity_mps2 * belief.nominal.friction_multiplier
     mu_s = math.exp(ln_l) / g_kappa
     if mu_s > MAX_FRICTION:
         return f"the fit would give mu_s = {mu_s:.4g} > {MAX_FRICTION:g}: non-physical"

@@ -2,23 +2,24 @@
 
 With one-way coupling a part's motion on a given carrier depends on friction only through the stick
 limit ``L = mu_s*g*kappa`` and the slip deceleration ``D = mu_d*g*kappa`` (``docs/model.md``,
-section 8): ``mu_s``, ``mu_d``, ``kappa`` and ``g`` are not separately identifiable, only ``L`` and
-``D``. An accelerometer gain ``k`` (measured = ``k`` * true) is exactly equivalent to a plant with
-``L``, ``D`` and every velocity scaled by ``k``; only truth measured in length and time separates it
-from friction. The belief is therefore a Gaussian over
+section 12.2): ``mu_s``, ``mu_d``, ``kappa`` and ``g`` are not separately identifiable, only
+``L`` and ``D``. An accelerometer gain ``k`` (measured = ``k`` * true) is exactly equivalent to a
+plant with ``L``, ``D`` and every velocity scaled by ``k``; only truth measured in length and time
+separates it from friction. The belief is a distribution over
 
     theta = (ln L, ln D, ln k)       (L, D in true m/s^2; k dimensionless)
 
-with a mean and a covariance: before any calibration the nominal values with the stated relative
-uncertainties (friction known to +-30 %, the gain to +-3 %), afterwards the posterior of
-:mod:`~feeder_ros.estimation.calibration`. The estimator runs the part model on the *measured*
-carrier with ``L*k`` and ``D*k`` and divides its speeds by ``k``.
+held as a set of equally weighted *particles* (samples), with their mean and covariance as its
+summary: before any calibration, samples of a normal distribution around the nominal values with
+the stated relative uncertainties (friction known to +-30 %, the gain to +-3 %); afterwards the
+posterior of :mod:`~feeder_ros.estimation.calibration`. Samples, not a covariance, carry it
+because the part's speed is not a smooth function of friction: where a carrier's acceleration
+peak grazes the stick limit, 0.5 % more friction can cost 10 % of the speed (a slip per period
+fewer), so a linearised propagation is confidently wrong exactly there.
 
-:func:`predict_speed` gives the steady mean speed a belief predicts on a carrier model (a periodic
-:class:`~feeder_ros.estimation.carrier_velocity.HarmonicFit`), its gradient with respect to
-``theta`` (central differences over each parameter's own standard deviation, so that a kink such as
-a slip onset inside the uncertain range is seen) and the standard uncertainty the belief's
-covariance gives it: ``sigma^2 = J Sigma J^T``.
+The estimator runs the part on the *measured* carrier with ``L*k`` and ``D*k`` at the mean and
+divides its speeds by ``k``; :func:`predict_speed` runs every particle on a carrier model and
+reports the spread of their speeds around that estimate as its standard uncertainty.
 """
 
 from __future__ import annotations
@@ -28,6 +29,7 @@ from dataclasses import dataclass, field, replace
 
 import numpy as np
 import numpy.typing as npt
+from scipy.stats import norm, qmc
 
 from feeder_ros.estimation.carrier_velocity import HarmonicFit
 from feeder_ros.estimation.stick_slip_observer import PartModel, StickSlipObserver
@@ -37,6 +39,7 @@ __all__ = [
     "CarrierRun",
     "PartBelief",
     "SpeedPrediction",
+    "gaussian_particles",
     "mean_speed_on",
     "predict_speed",
 ]
@@ -44,6 +47,10 @@ __all__ = [
 F64 = npt.NDArray[np.float64]
 #: parameter names of theta, in order
 THETA_NAMES = ("ln_stick_limit", "ln_slip_deceleration", "ln_accelerometer_gain")
+#: particles a belief carries for the estimator's own uncertainty runs
+BELIEF_PARTICLES = 64
+#: the gap kept between ln D and ln L: a particle at or past it would have mu_d >= mu_s
+MIN_LOG_MARGIN = 1e-3
 
 
 def _check_fraction(name: str, value: float, upper: float) -> float:
@@ -52,21 +59,45 @@ def _check_fraction(name: str, value: float, upper: float) -> float:
     return float(value)
 
 
+def gaussian_particles(mean: F64, covariance: F64, count: int, seed: int = 0) -> F64:
+    """``count`` samples of N(mean, covariance) from a scrambled Sobol sequence (deterministic for
+    a seed; ``count`` a power of two keeps its balance), each with ``ln D < ln L``: a sample past
+    that is mirrored back into the region."""
+    if count < 1 or count & (count - 1):
+        raise ParameterError(f"count={count!r} must be a power of two")
+    sobol = qmc.Sobol(3, scramble=True, seed=seed).random(count)
+    z = norm.ppf(np.clip(sobol, 1e-9, 1.0 - 1e-9))
+    values, vectors = np.linalg.eigh(0.5 * (covariance + covariance.T))
+    root = vectors * np.sqrt(np.maximum(values, 0.0))
+    theta = np.asarray(mean, np.float64) + z @ root.T
+    over = theta[:, 1] - theta[:, 0] + MIN_LOG_MARGIN
+    theta[:, 1] -= np.where(over > 0.0, 2.0 * over, 0.0)
+    return np.asarray(theta, np.float64)
+
+
 @dataclass(frozen=True)
 class PartBelief:
-    """A Gaussian belief over ``theta = (ln L, ln D, ln k)`` (see the module docstring).
+    """A belief over ``theta = (ln L, ln D, ln k)`` (see the module docstring): equally weighted
+    ``particles`` (n x 3) and their ``mean`` and ``covariance``.
 
     ``nominal`` carries ``kappa`` and ``g`` (to express ``L``, ``D`` as friction coefficients) and
-    the nominal friction the prior is centred on. ``transits``/``operator_speeds``: how many
-    measurements went into it.
+    the nominal friction the prior is centred on; the values (``stick_limit_mps2``, ``gain``,
+    ``static_friction``, ...) are those of ``estimate``, their uncertainties ``std``.
+    ``transits``/``operator_speeds``: how many measurements went into it; ``points``: the (drive
+    frequency, amplitude) they were taken at.
     """
 
     nominal: PartModel
     mean: F64
     covariance: F64
+    particles: F64 = field(default_factory=lambda: np.zeros((0, 3)))
+    #: the theta the estimator runs: the posterior mean where its speeds agree with the
+    #: measurements as well as the best particle's (within 2 in log-likelihood), else the best
+    #: particle (the mean of a curved or split posterior need not fit the data); the prior's mean
+    estimate: F64 = field(default_factory=lambda: np.full(3, np.nan))
     transits: int = 0
     operator_speeds: int = 0
-    points: tuple[tuple[float, float], ...] = field(default=())  #: (f_d, amplitude) seen
+    points: tuple[tuple[float, float], ...] = field(default=())
 
     def __post_init__(self) -> None:
         mean = np.array(self.mean, dtype=np.float64).reshape(3)
@@ -76,8 +107,16 @@ class PartBelief:
         cov = 0.5 * (cov + cov.T)
         if np.any(np.linalg.eigvalsh(cov) < -1e-12):
             raise ParameterError(f"belief covariance {cov.tolist()} is not positive semi-definite")
+        particles = np.array(self.particles, dtype=np.float64).reshape(-1, 3)
+        if particles.shape[0] == 0:
+            particles = gaussian_particles(mean, cov, BELIEF_PARTICLES)
+        estimate = np.array(self.estimate, dtype=np.float64).reshape(3)
+        if not np.all(np.isfinite(estimate)):
+            estimate = mean.copy()
+        object.__setattr__(self, "estimate", estimate)
         object.__setattr__(self, "mean", mean)
         object.__setattr__(self, "covariance", cov)
+        object.__setattr__(self, "particles", particles)
 
     @classmethod
     def prior(
@@ -96,17 +135,17 @@ class PartBelief:
     @property
     def stick_limit_mps2(self) -> float:
         """L = mu_s*g*kappa [m/s^2, true units]."""
-        return math.exp(float(self.mean[0]))
+        return math.exp(float(self.estimate[0]))
 
     @property
     def slip_deceleration_mps2(self) -> float:
         """D = mu_d*g*kappa [m/s^2, true units]."""
-        return math.exp(float(self.mean[1]))
+        return math.exp(float(self.estimate[1]))
 
     @property
     def gain(self) -> float:
         """Accelerometer gain k (measured / true)."""
-        return math.exp(float(self.mean[2]))
+        return math.exp(float(self.estimate[2]))
 
     @property
     def std(self) -> F64:
@@ -127,24 +166,34 @@ class PartBelief:
 
     def measured_part(self, theta: F64 | None = None) -> PartModel:
         """The part model the estimator runs on the measured carrier: ``L*k``, ``D*k``."""
-        ln_l, ln_d, ln_k = self.mean if theta is None else theta
+        ln_l, ln_d, ln_k = self.estimate if theta is None else theta
         L = math.exp(float(ln_l + ln_k))
         D = min(math.exp(float(ln_d + ln_k)), L)
         g = self.nominal.gravity_mps2
         return PartModel(L / g, D / g, 1.0, g)
 
-    def with_values(
+    def updated(
         self,
-        mean: F64,
-        covariance: F64,
+        weighted: tuple[F64, F64],
+        estimate: F64,
         transits: int,
         operator_speeds: int,
         points: tuple[tuple[float, float], ...],
     ) -> PartBelief:
+        """The belief a weighted particle set (theta n x 3, weights n) describes: its moments,
+        ``estimate``, and ``BELIEF_PARTICLES`` of it resampled."""
+        theta, weights = weighted
+        mean = weights @ theta
+        centred = theta - mean
+        cov = (centred * weights[:, None]).T @ centred
+        positions = (np.arange(BELIEF_PARTICLES) + 0.5) / BELIEF_PARTICLES  # systematic
+        index = np.minimum(np.searchsorted(np.cumsum(weights), positions), len(theta) - 1)
         return replace(
             self,
-            mean=mean,
-            covariance=covariance,
+            mean=np.asarray(mean, np.float64),
+            covariance=np.asarray(0.5 * (cov + cov.T), np.float64),
+            particles=np.asarray(theta[index], np.float64),
+            estimate=np.asarray(estimate, np.float64),
             transits=transits,
             operator_speeds=operator_speeds,
             points=points,
@@ -172,11 +221,32 @@ class CarrierRun:
         _, v, a = fit.evaluate(t)
         return cls(np.asarray(t, np.float64), v, a, n_settle)
 
+    @classmethod
+    def over(cls, fit: HarmonicFit, dt_s: float, span_s: float) -> CarrierRun:
+        """``span_s`` (at least four response periods) ending at the fit's last sample, the first
+        half to settle: the window the estimator's own uncertainty runs use."""
+        period = 1.0 / fit.base_frequency_hz
+        half = max(2, math.ceil(0.5 * span_s / period))
+        return cls.of(fit, dt_s, half, half)
+
     def mean_speed(self, part: PartModel) -> float:
         """Mean speed of ``part`` started in stick, over the samples after ``settle``."""
+        return self.motion(part)[0]
+
+    def motion(self, part: PartModel) -> tuple[float, F64]:
+        """``part``'s mean speed and its velocity at the samples after ``settle``."""
         out = StickSlipObserver(part).update(self.t_s, self.velocity_mps, self.acceleration_mps2)
         span = float(self.t_s[-1] - self.t_s[self.settle])
-        return float(np.sum(out.part_dx_m[self.settle + 1 :])) / span
+        return (
+            float(np.sum(out.part_dx_m[self.settle + 1 :])) / span,
+            np.asarray(out.part_v_mps[self.settle + 1 :], np.float64),
+        )
+
+    def speeds(self, belief: PartBelief, thetas: F64) -> F64:
+        """True mean speeds for each row of ``thetas`` (measured-carrier runs divided by k)."""
+        return np.array(
+            [self.mean_speed(belief.measured_part(th)) / math.exp(float(th[2])) for th in thetas]
+        )
 
 
 def mean_speed_on(
@@ -189,12 +259,15 @@ def mean_speed_on(
 
 @dataclass(frozen=True)
 class SpeedPrediction:
-    """A belief's steady mean speed on a carrier model [true m/s], its gradient with respect to
-    ``theta`` and the standard uncertainty ``sqrt(J Sigma J^T)`` [m/s]."""
+    """A belief's steady mean speed on a carrier model [true m/s] (its estimate's) and its
+    standard uncertainty [m/s]: the RMS deviation of the particles' speeds from it, or the wider
+    side of their central 95 % over 1.96, whichever is larger;
+    ``velocity_spread_mps``: the RMS deviation of the particles' part velocities over the run
+    from the mean part's (the part model's share of the velocity's uncertainty)."""
 
     speed_mps: float
-    gradient: F64
     uncertainty_mps: float
+    velocity_spread_mps: float = 0.0
 
 
 def predict_speed(
@@ -203,31 +276,33 @@ def predict_speed(
     dt_s: float = 1e-3,
     settle_periods: int = 10,
     periods: int = 20,
-    theta: F64 | None = None,
-    steps: F64 | None = None,
 ) -> SpeedPrediction:
     """See the module docstring. ``carrier``: a fit (sampled at ``dt_s`` for ``settle_periods`` +
-    ``periods`` response periods) or an already sampled :class:`CarrierRun`; ``theta``: evaluate
-    there instead of at the belief's mean; ``steps``: the central-difference steps (default: each
-    parameter's standard deviation, at least 1 %)."""
+    ``periods`` response periods) or an already sampled :class:`CarrierRun`."""
     run = (
         carrier
         if isinstance(carrier, CarrierRun)
         else CarrierRun.of(carrier, dt_s, settle_periods, periods)
     )
-    th = np.array(belief.mean if theta is None else theta, dtype=np.float64)
 
-    def speed(x: F64) -> float:
-        return run.mean_speed(belief.measured_part(x)) / math.exp(float(x[2]))
+    def motion(theta: F64) -> tuple[float, F64]:
+        k = math.exp(float(theta[2]))
+        speed, velocity = run.motion(belief.measured_part(theta))
+        return speed / k, velocity / k
 
-    centre = speed(th)
-    h = np.maximum(belief.std, 0.01) if steps is None else np.asarray(steps, np.float64)
-    grad = np.zeros(3)
-    for i in range(3):
-        if h[i] <= 0.0:
-            continue
-        e = np.zeros(3)
-        e[i] = h[i]
-        grad[i] = (speed(th + e) - speed(th - e)) / (2.0 * h[i])
-    variance = float(grad @ belief.covariance @ grad)
-    return SpeedPrediction(centre, grad, math.sqrt(max(variance, 0.0)))
+    centre, u_centre = motion(belief.estimate)
+    particles = belief.particles
+    if len(particles) == 0:
+        return SpeedPrediction(centre, 0.0)
+    speeds = np.empty(len(particles))
+    spread = 0.0
+    for i, theta in enumerate(particles):
+        speeds[i], velocity = motion(theta)
+        spread += float(np.mean((velocity - u_centre) ** 2))
+    # the speed is not linear in friction (less slip deceleration: much faster parts), so the
+    # particles' speeds spread unevenly: the uncertainty covers the wider side of their central
+    # 95 % at 1.96 sigma, and is never less than their RMS deviation
+    rms = math.sqrt(float(np.mean((speeds - centre) ** 2)))
+    low, high = np.quantile(speeds, [0.025, 0.975])
+    wide = max(centre - float(low), float(high) - centre, 0.0) / 1.96
+    return SpeedPrediction(centre, max(rms, wide), math.sqrt(spread / len(particles)))

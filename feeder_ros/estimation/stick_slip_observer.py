@@ -375,6 +375,10 @@ class StickSlipObserver:
     def phase(self) -> int:
         return int(self._state[_S_PHASE])
 
+    def set_part(self, part: PartModel) -> None:
+        """Run on with another part model (a calibrated one), keeping the part's state."""
+        self._part = part
+
     def reset(self) -> None:
         """Forget the part's state; the next sample starts it again."""
         self._state[:] = 0.0

@@ -44,7 +44,7 @@ import contextlib
 import enum
 import math
 import numbers
-from dataclasses import dataclass, field
+from dataclasses import dataclass, field, replace
 from typing import Any
 
 import numpy as np
@@ -59,6 +59,7 @@ from feeder_ros.estimation.carrier_velocity import (
     refine_frequency,
     select_period_order,
 )
+from feeder_ros.estimation.part_belief import CarrierRun, PartBelief, predict_speed
 from feeder_ros.estimation.stick_slip_observer import (
     PHASE_STICK,
     PartModel,
@@ -79,6 +80,9 @@ I8 = npt.NDArray[np.int8]
 B = npt.NDArray[np.bool_]
 
 _HIST_SUMS = ("x_all", "x_valid", "slip_valid", "time_valid")
+#: the band a confidence is the probability of: +-(5 % of the value + 0.05 mm/s)
+CONFIDENCE_RELATIVE = 0.05
+CONFIDENCE_ABSOLUTE = 0.05e-3
 #: a sample's largest magnitude (m/s^2, or m for displacement input): beyond it the sample is
 #: invalid, as a non-finite one is (no accelerometer reads 100,000 g; the fit would overflow)
 MAX_ABS_SAMPLE = 1e6
@@ -100,8 +104,8 @@ _PRIORITY = (
     Status.OUT_OF_ORDER,
     Status.INVALID_SAMPLES,
     Status.GAP,
-    Status.DRIVE_CHANGED,
     Status.SETTLING,
+    Status.DRIVE_CHANGED,
 )
 
 
@@ -128,6 +132,15 @@ class EstimatorConfig:
     frequency_tolerance: float = 0.005  #: a first command this close to the estimate is no change
     observer_settle_s: float = 0.2  #: the part's state is an initial guess for this long
     model_error_scale: float = 0.1  #: model error / (mu_s*g*kappa) at which confidence is 0.5
+    #: relative standard uncertainty of the uncalibrated friction (L and D) and of the
+    #: accelerometer gain (the prior of :class:`~feeder_ros.estimation.part_belief.PartBelief`)
+    friction_uncertainty: float = 0.3
+    gain_uncertainty: float = 0.03
+    #: the part model's own error at the true parameters, relative (discretisation, model form)
+    method_uncertainty: float = 0.005
+    #: a mean speed is valid once this fraction of ``window_s`` lies after the carrier fit
+    #: converged (and the part state settled) at the current drive setting
+    min_valid_window: float = 0.5
 
     def __post_init__(self) -> None:
         positive = (
@@ -142,6 +155,7 @@ class EstimatorConfig:
             "clock_reset_s",
             "frequency_tolerance",
             "model_error_scale",
+            "min_valid_window",
         )
         for name in positive:
             value = getattr(self, name)
@@ -152,6 +166,9 @@ class EstimatorConfig:
             "observer_settle_s",
             "coefficient_threshold_sigma",
             "batch_interval_s",
+            "friction_uncertainty",
+            "gain_uncertainty",
+            "method_uncertainty",
         ):
             value = getattr(self, name)
             if not (is_number(value) and math.isfinite(value) and value >= 0.0):
@@ -164,6 +181,8 @@ class EstimatorConfig:
             raise ParameterError(f"max_period_order={self.max_period_order!r} must be an int >= 1")
         if self.gap_factor <= 1.0:
             raise ParameterError(f"gap_factor={self.gap_factor!r} must be > 1")
+        if self.min_valid_window > 1.0:
+            raise ParameterError(f"min_valid_window={self.min_valid_window!r} must be <= 1")
         if self.min_fit_s > self.fit_window_s:
             raise ParameterError(
                 f"min_fit_s={self.min_fit_s!r} must not exceed fit_window_s={self.fit_window_s!r}"
@@ -185,6 +204,7 @@ class VehicleEstimate:
     t_s: float
     carrier_velocity_mps: float
     part_velocity_mps: float
+    part_velocity_uncertainty_mps: float  #: standard uncertainty (nan: none)
     part_velocity_confidence: float
     phase: int
     phase_confidence: float
@@ -193,6 +213,7 @@ class VehicleEstimate:
     slip_fraction: float
     slip_fraction_confidence: float
     mean_speed_mps: float
+    mean_speed_uncertainty_mps: float  #: standard uncertainty (nan: no valid mean speed)
     mean_speed_confidence: float
     window_s: float
     status: Status
@@ -218,6 +239,37 @@ def _empty_trace() -> EstimateTrace:
     return EstimateTrace(
         np.zeros(0), np.zeros(0), np.zeros(0), np.zeros(0), np.zeros(0, np.int8), np.zeros(0, bool)
     )
+
+
+def _smoothed(old: float, new: float, fresh: bool) -> float:
+    if fresh or not (math.isfinite(old) and math.isfinite(new)):
+        return new
+    return old + 0.1 * (new - old)
+
+
+def _confidence(value: float, sigma: float) -> float:
+    """The probability that the truth lies within +-(5 % of |value| + 0.05 mm/s, or mm for an
+    advance) of ``value`` for a normal error of standard deviation ``sigma``; 0 without a value
+    or an uncertainty."""
+    if not (math.isfinite(value) and math.isfinite(sigma)):
+        return 0.0
+    tolerance = CONFIDENCE_RELATIVE * abs(value) + CONFIDENCE_ABSOLUTE
+    if sigma <= 0.0:
+        return 1.0
+    return math.erf(tolerance / (sigma * math.sqrt(2.0)))
+
+
+@dataclass(frozen=True)
+class _Window:
+    """The window statistics of one record (nan / 0 where not valid)."""
+
+    mean_speed_mps: float = math.nan
+    mean_speed_uncertainty_mps: float = math.nan
+    slip_fraction: float = math.nan
+    slip_confidence: float = 0.0
+    advance_m: float = math.nan
+    advance_confidence: float = 0.0
+    measured_s: float = 0.0
 
 
 class _Columns:
@@ -276,9 +328,17 @@ class VehicleEstimator:
     of that call.
     """
 
-    def __init__(self, config: EstimatorConfig | None = None) -> None:
+    def __init__(
+        self, config: EstimatorConfig | None = None, belief: PartBelief | None = None
+    ) -> None:
         self._cfg = config if config is not None else EstimatorConfig()
-        self._observer = StickSlipObserver(self._cfg.part)
+        cfg = self._cfg
+        self._belief = (
+            belief
+            if belief is not None
+            else PartBelief.prior(cfg.part, cfg.friction_uncertainty, cfg.gain_uncertainty)
+        )
+        self._observer = StickSlipObserver(self._belief.measured_part())
         self._command: tuple[float, float] | None = None
         self.reset()
 
@@ -305,6 +365,32 @@ class VehicleEstimator:
     def last_estimate(self) -> VehicleEstimate:
         return self._record
 
+    @property
+    def belief(self) -> PartBelief:
+        """The part model in use, with its uncertainty."""
+        return self._belief
+
+    @property
+    def drive_command(self) -> tuple[float, float] | None:
+        """The last drive command (frequency Hz, amplitude), or None."""
+        return self._command
+
+    @property
+    def steady_since_s(self) -> float:
+        """Since when the carrier has run steadily at the current drive setting and the estimate
+        rests on a converged carrier model (nan while settling): measurements of the part's speed
+        that lie wholly after it belong to this operating point."""
+        return self._valid_from
+
+    def set_belief(self, belief: PartBelief) -> None:
+        """Use another part model (a calibration's): from now on, with its uncertainty. The
+        statistics window runs on; its older part carries the old model for up to ``window_s``,
+        and the reported uncertainty moves to the new one over about a second."""
+        self._belief = belief
+        self._observer.set_part(belief.measured_part())
+        self._sensitivity_fresh = True
+        self._last_fit_t = -math.inf  # refit (and re-derive the uncertainty) at the next samples
+
     def reset(self) -> None:
         """Forget all samples and estimates (the drive command is kept)."""
         self._observer.reset()
@@ -318,7 +404,10 @@ class VehicleEstimator:
         self._prev_measured = False
         self._dt_nominal: float | None = None
         self._fit: HarmonicFit | None = None
-        self._q_speed = self._q_slip = 1.0
+        self._q_slip = 1.0
+        self._sigma_carrier = self._sigma_part = self._spread = math.nan
+        self._converged_t = math.nan  # first converged carrier fit of this drive epoch
+        self._valid_from = math.nan  # the statistics count from here (converged, part settled)
         self._sensitivity_fresh = True
         self._last_carrier = (math.nan, math.nan)
         self._order = 1
@@ -496,6 +585,9 @@ class VehicleEstimator:
                     self._observer.reset()
                     self._observer_start = t1
                     self._stats_start = t1
+                    if math.isfinite(self._valid_from):
+                        self._valid_from = t1 + cfg.observer_settle_s
+                        self._stats_start = self._valid_from
                 else:
                     n = max(1, round((t1 - t0) / self._dt_nominal))
                     synth_t.append(t0 + (t1 - t0) * np.arange(1, n) / n)
@@ -550,6 +642,7 @@ class VehicleEstimator:
         self._freq = frequency_hz
         self._freq_refined = False
         self._sensitivity_fresh = True
+        self._converged_t = self._valid_from = math.nan
         self._fit = None
         self._order = 1
         self._last_fit_t = -math.inf
@@ -679,47 +772,70 @@ class VehicleEstimator:
         except CarrierFitError:
             return
         self._fit = fit.significant(cfg.coefficient_threshold_sigma)
-        q_speed, q_slip = self._sensitivity(self._fit)
-        if self._sensitivity_fresh:  # first fit of an epoch: no history to smooth with
-            self._q_speed, self._q_slip = q_speed, q_slip
-            self._sensitivity_fresh = False
-        else:  # one fit is a noisy snapshot: smooth over about ten refits
-            self._q_speed += 0.1 * (q_speed - self._q_speed)
-            self._q_slip += 0.1 * (q_slip - self._q_slip)
+        self._note_convergence(self._fit)
+        sigma_carrier, sigma_part, spread, q_slip = self._uncertainty(self._fit)
+        # one fit is a noisy snapshot: smoothed over about ten refits, except the first fit of
+        # an epoch or a new belief (no history) and a value that is not finite (no mixing)
+        fresh = self._sensitivity_fresh
+        self._sigma_carrier = _smoothed(self._sigma_carrier, sigma_carrier, fresh)
+        self._sigma_part = _smoothed(self._sigma_part, sigma_part, fresh)
+        self._spread = _smoothed(self._spread, spread, fresh)
+        self._q_slip = _smoothed(self._q_slip, q_slip, fresh)
+        self._sensitivity_fresh = False
         self._last_fit_t = self._last_t
 
-    def _sensitivity(self, fit: HarmonicFit) -> tuple[float, float]:
-        """Confidence factors of mean speed and slip fraction from their sensitivity to the
-        acceleration uncertainty: the nominal part is run on the model (one fit window) with the
-        stick limit moved by +-1 sigma of the modelled acceleration (equivalently, the carrier's
-        acceleration shifted against a fixed limit). Where a peak grazes the limit the statistics
-        swing, and the confidence says so; a 1-sigma swing of 2 % of the speed (0.02 of slip
-        fraction) halves it."""
+    def _note_convergence(self, fit: HarmonicFit) -> None:
+        """The first fit of a drive epoch that covers a full fit window with a small model error
+        (the carrier's transient has decayed, the period order is right) converges the carrier
+        model; the statistics count from ``observer_settle_s`` after it."""
         cfg = self._cfg
-        part = cfg.part
-        span = max(cfg.fit_window_s, 4.0 / fit.base_frequency_hz)
+        if math.isfinite(self._converged_t):
+            return
+        full = fit.span_s >= 0.9 * cfg.fit_window_s
+        small = fit.model_error_rms_mps2 <= cfg.model_error_scale * cfg.part.stick_limit_mps2
+        if full and small:
+            self._converged_t = self._last_t
+            self._valid_from = self._last_t + cfg.observer_settle_s
+            self._stats_start = max(self._stats_start, self._valid_from)
+
+    def _uncertainty(self, fit: HarmonicFit) -> tuple[float, float, float, float]:
+        """Standard uncertainties of the mean speed [true m/s] from the carrier model and from the
+        part model, the part model's share of the part velocity's uncertainty, and the slip
+        fraction's confidence factor, from runs of the part on the fit (one fit window, the
+        first half to settle; ``docs/model.md`` section 12.3):
+
+        * carrier: the stick limit moved by +-1 sigma of the modelled acceleration (noise and
+          model error; equivalently the carrier's acceleration shifted against a fixed limit):
+          where a peak grazes the limit the speed swings, and the larger swing is the sigma;
+        * part model: ``sqrt(J Sigma J^T)`` of the belief (friction, gain) by central
+          differences over each parameter's standard deviation.
+
+        A 1-sigma swing of 0.02 of the slip fraction halves its confidence factor."""
+        belief = self._belief
         dt = self._dt_nominal or 1e-3
-        t = fit.t_end_s - span + dt * np.arange(round(span / dt) + 1)
-        _, v, a = fit.evaluate(t)
-        half = t.size // 2
+        run = CarrierRun.over(fit, dt, max(self._cfg.fit_window_s, 4.0 / fit.base_frequency_hz))
+        k = belief.gain
+        part = belief.measured_part()
         delta = fit.acceleration_uncertainty_mps2
         speeds, slips = [], []
         for shift in (-delta, 0.0, delta):
             limit = part.stick_limit_mps2 + shift
             if limit <= part.slip_deceleration_mps2:
-                return 0.0, 0.0
-            mu_s = part.static_friction * limit / part.stick_limit_mps2
-            obs = StickSlipObserver(
-                PartModel(mu_s, part.kinetic_friction, part.friction_multiplier, part.gravity_mps2)
-            )
-            out = obs.update(t, v, a)
-            T = float(t[-1] - t[half])
-            speeds.append(float(np.sum(out.part_dx_m[half + 1 :])) / T)
-            slips.append(float(np.sum(out.slip_s[half + 1 :])) / T)
-        d_speed = max(abs(speeds[0] - speeds[1]), abs(speeds[2] - speeds[1]))
+                return math.inf, math.inf, math.inf, 0.0
+            obs = StickSlipObserver(PartModel(limit / part.gravity_mps2, part.kinetic_friction))
+            out = obs.update(run.t_s, run.velocity_mps, run.acceleration_mps2)
+            T = float(run.t_s[-1] - run.t_s[run.settle])
+            speeds.append(float(np.sum(out.part_dx_m[run.settle + 1 :])) / T / k)
+            slips.append(float(np.sum(out.slip_s[run.settle + 1 :])) / T)
+        sigma_carrier = max(abs(speeds[0] - speeds[1]), abs(speeds[2] - speeds[1]))
         d_slip = max(abs(slips[0] - slips[1]), abs(slips[2] - slips[1]))
-        rel = d_speed / max(abs(speeds[1]), 1e-12)
-        return 1.0 / (1.0 + (rel / 0.02) ** 2), 1.0 / (1.0 + (d_slip / 0.02) ** 2)
+        prediction = predict_speed(run, belief)
+        return (
+            sigma_carrier,
+            prediction.uncertainty_mps,
+            prediction.velocity_spread_mps,
+            1.0 / (1.0 + (d_slip / 0.02) ** 2),
+        )
 
     def _estimate_pending(self) -> None:
         if self._fit is None or len(self._pending) == 0:
@@ -795,20 +911,52 @@ class VehicleEstimator:
             )
         message = "; ".join(notes) if notes else "ok"
         freq = self._freq if self._freq is not None else nan
-        if not math.isfinite(self._last_t):
+        if not math.isfinite(self._last_t) or fit is None or len(self._hist) == 0:
+            no_input = not math.isfinite(self._last_t) and not self._events
             return VehicleEstimate(
-                nan, nan, nan, 0.0, PHASE_STICK, 0.0, nan, 0.0, nan, 0.0, nan, 0.0, 0.0,
-                Status.NO_INPUT if not self._events else status,
-                "no accelerometer samples yet" if not self._events else message,
+                self._last_t if math.isfinite(self._last_t) else nan,
+                nan, nan, nan, 0.0, PHASE_STICK, 0.0, nan, 0.0, nan, 0.0, nan, nan, 0.0, 0.0,
+                Status.NO_INPUT if no_input else status,
+                "no accelerometer samples yet" if no_input else message,
                 freq, 0,
             )  # fmt: skip
-        if fit is None or len(self._hist) == 0:
-            return VehicleEstimate(
-                self._last_t, nan, nan, 0.0, PHASE_STICK, 0.0, nan, 0.0, nan, 0.0, nan, 0.0, 0.0,
-                status, message, freq, 0,
-            )  # fmt: skip
         t_end = float(self._hist.col("t")[-1])
-        L = cfg.part.stick_limit_mps2
+        k = self._belief.gain
+        v_c, a_c = self._last_carrier
+        u = self._observer.part_velocity_mps
+        sigma_u = math.hypot(fit.velocity_uncertainty_mps / k, self._spread)
+        window = self._window_statistics(t_end)
+        return VehicleEstimate(
+            t_s=t_end,
+            carrier_velocity_mps=v_c / k,
+            part_velocity_mps=u / k,
+            part_velocity_uncertainty_mps=sigma_u,
+            part_velocity_confidence=_confidence(u / k, sigma_u),
+            phase=self._observer.phase,
+            phase_confidence=self._phase_confidence(fit, t_end, v_c, a_c, u),
+            advance_per_cycle_m=window.advance_m,
+            advance_per_cycle_confidence=window.advance_confidence,
+            slip_fraction=window.slip_fraction,
+            slip_fraction_confidence=window.slip_confidence,
+            mean_speed_mps=window.mean_speed_mps,
+            mean_speed_uncertainty_mps=window.mean_speed_uncertainty_mps,
+            mean_speed_confidence=_confidence(
+                window.mean_speed_mps, window.mean_speed_uncertainty_mps
+            ),
+            window_s=window.measured_s,
+            status=status,
+            status_message=message,
+            drive_frequency_hz=freq,
+            period_order=self._order,
+        )
+
+    def _phase_confidence(
+        self, fit: HarmonicFit, t_end: float, v_c: float, a_c: float, u: float
+    ) -> float:
+        """The phase's margin (distance to the stick limit, or relative velocity) in units of its
+        uncertainty, times the fit's and the part state's quality."""
+        cfg = self._cfg
+        L = self._belief.measured_part().stick_limit_mps2
         q_fit = 1.0 / (1.0 + (fit.model_error_rms_mps2 / (cfg.model_error_scale * L)) ** 2)
         q_fill = min(1.0, fit.span_s / cfg.fit_window_s)
         q_obs = (
@@ -816,65 +964,60 @@ class VehicleEstimator:
             if cfg.observer_settle_s > 0.0
             else 1.0
         )
-        q = q_fit * q_fill * q_obs
-        v_c, a_c = self._last_carrier
-        u = self._observer.part_velocity_mps
-        phase = self._observer.phase
-        if phase == PHASE_STICK:
+        if self._observer.phase == PHASE_STICK:
             margin = (L - abs(a_c)) / max(fit.acceleration_uncertainty_mps2, 1e-12)
         else:
             margin = abs(v_c - u) / max(fit.velocity_uncertainty_mps, 1e-12)
-        phase_conf = q * 0.5 * (1.0 + math.erf(margin / math.sqrt(2.0)))
-        # window statistics
+        return q_fit * q_fill * q_obs * 0.5 * (1.0 + math.erf(margin / math.sqrt(2.0)))
+
+    def _window_statistics(self, t_end: float) -> _Window:
+        """Mean speed, slip fraction and advance per cycle, valid only over a window that lies
+        wholly after the current drive setting's carrier model converged (``steady_since_s``) and
+        covers ``min_valid_window`` of ``window_s``; otherwise nan (status SETTLING)."""
+        cfg = self._cfg
+        k = self._belief.gain
+        if not (math.isfinite(self._valid_from) and t_end > self._valid_from):
+            return _Window()
         w_start = max(t_end - cfg.window_s, self._stats_start)
         tv = self._cumulative_at("time_valid", t_end) - self._cumulative_at("time_valid", w_start)
-        if tv > 0.0:
-            mean_speed = (
-                self._cumulative_at("x_valid", t_end) - self._cumulative_at("x_valid", w_start)
-            ) / tv
-            slip_frac = (
-                self._cumulative_at("slip_valid", t_end)
-                - self._cumulative_at("slip_valid", w_start)
-            ) / tv
+        if tv < cfg.min_valid_window * cfg.window_s - 1.5 * (self._dt_nominal or 0.0):
+            return _Window(measured_s=max(tv, 0.0))
+        if self._fit is not None:
+            # whole response periods: within one, the part's position swings with the carrier, so
+            # a mean over a fraction of one more period is off by that swing over the window
+            period = 1.0 / self._fit.base_frequency_hz
+            whole = math.floor((t_end - w_start) / period + 1e-9)
+            if whole >= 1:
+                w_start = t_end - whole * period
+                tv = self._cumulative_at("time_valid", t_end)
+                tv -= self._cumulative_at("time_valid", w_start)
+        mean = (
+            self._cumulative_at("x_valid", t_end) - self._cumulative_at("x_valid", w_start)
+        ) / tv
+        slip = (
+            self._cumulative_at("slip_valid", t_end) - self._cumulative_at("slip_valid", w_start)
+        ) / tv
+        mean /= k
+        sigma = math.sqrt(
+            self._sigma_carrier**2 + self._sigma_part**2 + (cfg.method_uncertainty * mean) ** 2
+        )
+        window = _Window(
+            mean_speed_mps=mean,
+            mean_speed_uncertainty_mps=sigma,
             # a difference of running totals over their own span: round-off can leave [0, 1]
-            slip_frac = min(max(slip_frac, 0.0), 1.0)
-            coverage = min(1.0, tv / cfg.window_s)
-            q_speed = q * self._q_speed * coverage
-            q_slip = q * self._q_slip * coverage
-        else:
-            mean_speed = slip_frac = nan
-            q_speed = q_slip = 0.0
-        advance, q_adv = nan, 0.0
-        if self._freq is not None:
-            period = 1.0 / self._freq
-            c_start = t_end - period
-            t_hist = self._hist.col("t")
-            if c_start >= max(float(t_hist[0]), self._observer_start):
-                advance = self._cumulative_at("x_all", t_end) - self._cumulative_at(
-                    "x_all", c_start
-                )
-                measured = self._cumulative_at("time_valid", t_end) - self._cumulative_at(
-                    "time_valid", c_start
-                )
-                q_adv = q * self._q_speed * min(1.0, measured / period)
-        return VehicleEstimate(
-            t_s=t_end,
-            carrier_velocity_mps=v_c,
-            part_velocity_mps=u,
-            part_velocity_confidence=q,
-            phase=phase,
-            phase_confidence=phase_conf,
-            advance_per_cycle_m=advance,
-            advance_per_cycle_confidence=q_adv,
-            slip_fraction=slip_frac,
-            slip_fraction_confidence=q_slip,
-            mean_speed_mps=mean_speed,
-            mean_speed_confidence=q_speed,
-            window_s=max(tv, 0.0),
-            status=status,
-            status_message=message,
-            drive_frequency_hz=freq,
-            period_order=self._order,
+            slip_fraction=min(max(slip, 0.0), 1.0),
+            slip_confidence=self._q_slip * min(1.0, tv / cfg.window_s),
+            measured_s=tv,
+        )
+        if self._freq is None:
+            return window
+        period = 1.0 / self._freq
+        c_start = t_end - period
+        if c_start < max(float(self._hist.col("t")[0]), self._valid_from):
+            return window
+        advance = (self._cumulative_at("x_all", t_end) - self._cumulative_at("x_all", c_start)) / k
+        return replace(
+            window, advance_m=advance, advance_confidence=_confidence(advance, sigma * period)
         )
 
     def _conditions(self) -> dict[Status, str]:
@@ -896,17 +1039,34 @@ class VehicleEstimator:
         if when is not None and when >= w_start:
             out[Status.DRIVE_CHANGED] = self._event_notes[Status.DRIVE_CHANGED]
         if math.isfinite(t_end):
-            settling = []
-            if self._freq is None:
-                settling.append("estimating the drive frequency")
-            if self._fit is None:
-                settling.append("waiting for enough samples to fit the carrier")
-            elif self._fit.span_s < 0.9 * cfg.fit_window_s:
-                settling.append("carrier fit window not full yet")
-            if t_end - self._stats_start < cfg.window_s - 1.5 * (self._dt_nominal or 0.0):
-                settling.append("statistics window not full yet")
-            if t_end - self._observer_start < cfg.observer_settle_s:
-                settling.append("part state settling")
+            settling = self._settling(t_end)
             if settling:
                 out[Status.SETTLING] = ", ".join(settling)
         return out
+
+    def _settling(self, t_end: float) -> list[str]:
+        """Why no mean speed is valid yet (empty once one is)."""
+        cfg = self._cfg
+        why = []
+        if self._freq is None:
+            why.append("estimating the drive frequency")
+        fit = self._fit
+        if fit is None:
+            why.append("waiting for enough samples to fit the carrier")
+        elif not math.isfinite(self._converged_t):
+            if fit.span_s < 0.9 * cfg.fit_window_s:
+                why.append("carrier fit window not full yet")
+            limit = cfg.model_error_scale * cfg.part.stick_limit_mps2
+            if fit.model_error_rms_mps2 > limit:
+                why.append(
+                    f"carrier model not converged (model error {fit.model_error_rms_mps2:.3g} > "
+                    f"{limit:.3g} m/s^2: transient, or not periodic)"
+                )
+        if math.isfinite(self._valid_from):
+            covered = t_end - max(self._valid_from, self._stats_start)
+            needed = cfg.min_valid_window * cfg.window_s - 1.5 * (self._dt_nominal or 0.0)
+            if t_end < self._valid_from:
+                why.append("part state settling")
+            elif covered < needed:
+                why.append(f"statistics window filling ({max(covered, 0.0):.2g} of {needed:.2g} s)")
+        return why

@@ -4,8 +4,11 @@ What a pick-and-place cell's PLC or orchestrator does with a feeder, as a small 
 
 1. bring the drive interface up (lifecycle configure + activate) and send a heartbeat; wait until
    the feeder's sensors are live (its estimator publishes: the accelerometer stream is up);
-2. start the feeder and ask for a part speed (``set_target_speed``), then watch ``speed/status``;
-3. change the speed;
+2. start the feeder and ask for a part speed (``set_target_speed``), then watch ``speed/status``
+   until the speed monitor confirms the target (on a feeder that is not its model the estimator
+   first calibrates its part model from the sensor transits, and the drive trims onto the target)
+   and hold it for a while;
+3. change the speed, the same way;
 4. go silent for longer than the watchdog timeout (as a crashed controller would): the drive
    interface ramps the feeder down and reports a fault; come back, reset the fault, restart;
 5. stop.
@@ -86,7 +89,7 @@ class CellController(Node):
         print(f"[controller {elapsed:6.1f} s] {step}" + (f": {extra}" if extra else ""), flush=True)
 
     def call(self, service_type: Any, name: str, request: Any, timeout_s: float = 30.0) -> Any:
-        client = self.create_client(service_type, name)
+        client: Any = self.create_client(service_type, name)
         try:
             if not client.wait_for_service(timeout_sec=timeout_s):
                 raise RuntimeError(f"service {self.get_namespace()}/{name} is not available")
@@ -165,6 +168,30 @@ class CellController(Node):
         )
         return bool(answer.result != 2)
 
+    def at_target(self) -> bool:
+        status = self.speed_status
+        return status is not None and status.level == 0 and status.message.startswith("at target")
+
+    def reach_target(self, hold_s: float, timeout_s: float) -> None:
+        """Wait until speed/status confirms the target and stays so for ``hold_s`` (at most
+        ``timeout_s`` in all); log what the speed monitor said at the end."""
+        started = time.monotonic()
+        since = math.nan
+        while time.monotonic() - started < timeout_s:
+            if self.at_target():
+                since = time.monotonic() if math.isnan(since) else since
+                if time.monotonic() - since >= hold_s:
+                    break
+            else:
+                since = math.nan
+            time.sleep(0.1)
+        reached = not math.isnan(since)
+        self.log(
+            "target reached" if reached else "target not confirmed",
+            after_s=round((since if reached else time.monotonic()) - started, 1),
+        )
+        self.watch_speed(0.0)
+
     def watch_speed(self, seconds: float) -> None:
         """Watch speed/status for a while; log what the speed monitor said at the end."""
         time.sleep(seconds)
@@ -180,6 +207,11 @@ class CellController(Node):
                 if math.isfinite(status.estimated_speed_mps)
                 else None
             ),
+            estimate_uncertainty_mm_s=(
+                round(status.estimated_speed_uncertainty_mps * 1e3, 3)
+                if math.isfinite(status.estimated_speed_uncertainty_mps)
+                else None
+            ),
             transit_mm_s=(
                 round(status.transit_speed_mps * 1e3, 2)
                 if math.isfinite(status.transit_speed_mps)
@@ -190,7 +222,7 @@ class CellController(Node):
             message=status.message,
         )
 
-    def scenario(self, first_mps: float, second_mps: float, hold_s: float) -> int:
+    def scenario(self, first_mps: float, second_mps: float, hold_s: float, timeout_s: float) -> int:
         self.bring_up()
         if not self.wait_for("drive state", lambda: self.drive_state is not None, 30.0):
             return 1
@@ -201,9 +233,9 @@ class CellController(Node):
         self.log("feeder sensors live")
         self.target_speed(first_mps)
         self.start()
-        self.watch_speed(hold_s)
+        self.reach_target(hold_s, timeout_s)
         self.target_speed(second_mps)
-        self.watch_speed(hold_s)
+        self.reach_target(hold_s, timeout_s)
 
         timeout = 2.0
         self.log("heartbeat stopped (simulating a controller crash)")
@@ -217,7 +249,7 @@ class CellController(Node):
         time.sleep(0.5)
         self.trigger("reset_fault")
         self.start()
-        self.watch_speed(hold_s)
+        self.reach_target(hold_s, timeout_s)
         self.trigger("stop")
         stopped = self.wait_for("stop", lambda: self.state_name() == "idle", 30.0)
         self.log("stopped", state=self.state_name())
@@ -229,7 +261,12 @@ def main(argv: list[str] | None = None) -> int:
     parser.add_argument("--namespace", default="/demo_cell/feeder_1")
     parser.add_argument("--speed", type=float, default=0.015, help="first target speed [m/s]")
     parser.add_argument("--second-speed", type=float, default=0.008, help="then [m/s]")
-    parser.add_argument("--hold", type=float, default=12.0, help="seconds at each speed")
+    parser.add_argument(
+        "--hold", type=float, default=4.0, help="seconds at each speed once it is confirmed"
+    )
+    parser.add_argument(
+        "--timeout", type=float, default=60.0, help="at most this long for each speed [s]"
+    )
     parser.add_argument("--timeline", type=Path, help="write the steps as JSON here")
     args = parser.parse_args(argv)
     with RosSession():
@@ -239,7 +276,7 @@ def main(argv: list[str] | None = None) -> int:
         spinner = threading.Thread(target=executor.spin, daemon=True)
         spinner.start()
         try:
-            status = controller.scenario(args.speed, args.second_speed, args.hold)
+            status = controller.scenario(args.speed, args.second_speed, args.hold, args.timeout)
         except RuntimeError as error:
             controller.log("failed", error=str(error))
             status = 1

@@ -3,15 +3,20 @@
 Inputs, each with its own time stamp in seconds (the node clock: simulated time and bag replay
 work; a stamp earlier than the last one seen means time jumped back and restarts every window):
 
-* the estimator's mean part speed (with its confidence),
+* the estimator's mean part speed (with its standard uncertainty and confidence),
 * part-present sensor edges (transit time between two sensors: the paper's 8.5 cm timing),
 * parts leaving the track (the feed rate, parts per minute),
 * the drive state (driving or not) and the target speed.
 
 :meth:`SpeedMonitor.evaluate` gives a :class:`MonitorStatus`: the measured values, a level
-(OK/WARN/ERROR, as diagnostic_msgs) and a bit set of alarms. Alarms have hysteresis: under- and
-overspeed raise when the relative error exceeds ``speed_tolerance`` for ``alarm_delay_s`` and clear
-only below ``speed_tolerance * clear_ratio``; stall, starvation, track full and sensor timeout
+(OK/WARN/ERROR, as diagnostic_msgs) and a bit set of alarms.
+
+Speed is judged against the estimate's uncertainty: the interval ``speed +- interval_sigma *
+uncertainty`` (95 % by default) must lie within the target's tolerance to be "at target"; under-
+and overspeed raise when the whole interval lies beyond the tolerance for ``alarm_delay_s`` (and
+clear only once the speed is within ``speed_tolerance * clear_ratio``); an interval that straddles
+the tolerance's edge is a warning that the estimate cannot confirm the target (an uncalibrated
+part model, a noisy carrier), never an OK. Stall, starvation, track full and sensor timeout
 raise after their configured times and clear as soon as the condition is gone.
 """
 
@@ -22,6 +27,7 @@ from collections import deque
 from dataclasses import dataclass, field
 
 from feeder_ros.physics.parameters import ParameterError, is_number
+from feeder_ros.sensors.transits import TransitTimer
 
 __all__ = [
     "ALARM_NAMES",
@@ -61,7 +67,9 @@ class MonitorConfig:
     speed_tolerance: float = 0.15  #: relative speed error that raises under/overspeed
     clear_ratio: float = 0.6  #: the alarm clears below speed_tolerance * clear_ratio
     alarm_delay_s: float = 2.0  #: a speed error must last this long to raise
-    min_confidence: float = 0.5  #: estimates below this confidence give no speed
+    min_confidence: float = 0.0  #: estimates below this confidence give no speed
+    #: the judged interval: the estimate +- this many of its standard uncertainties
+    interval_sigma: float = 2.0
     stall_speed_mps: float = 0.5e-3  #: driving with |speed| below this is a stall ...
     stall_time_s: float = 3.0  #: ... for this long
     starvation_time_s: float = 30.0  #: driving and no part seen for this long
@@ -84,6 +92,7 @@ class MonitorConfig:
             "feed_window_s",
             "transit_distance_m",
             "stall_speed_mps",
+            "interval_sigma",
         ):
             value = getattr(self, name)
             if not (is_number(value) and math.isfinite(value) and value > 0.0):
@@ -102,6 +111,7 @@ class MonitorStatus:
     t_s: float
     target_speed_mps: float  #: nan when no target is set
     estimated_speed_mps: float  #: nan when unknown
+    estimated_speed_uncertainty_mps: float  #: its standard uncertainty; nan when unknown
     transit_speed_mps: float  #: nan when no part has been timed yet
     feed_rate_ppm: float
     level: int  #: 0 OK, 1 WARN, 2 ERROR
@@ -117,8 +127,15 @@ class SpeedMonitor:
 
     def reconfigure(self, config: MonitorConfig) -> None:
         """New limits from now on; the state (raised alarms, timers, the feed-rate history, the
-        target) is kept: a parameter change must not hide an alarm."""
+        target) is kept: a parameter change must not hide an alarm. New transit sensors or
+        distance start a new pairing (edges already seen were timed for the old ones)."""
+        old = self.config
         self.config = config
+        if (config.transit_pair, config.transit_distance_m) != (
+            old.transit_pair,
+            old.transit_distance_m,
+        ):
+            self._transits = TransitTimer(*config.transit_pair, config.transit_distance_m)
 
     def reset(self) -> None:
         """Forget everything (also done when time jumps backwards)."""
@@ -127,6 +144,7 @@ class SpeedMonitor:
         self._driving_since = math.nan
         self._target = math.nan
         self._speed = math.nan
+        self._sigma = math.nan
         self._speed_t = -math.inf
         self._heard_t = -math.inf  # the last estimate message, whatever its confidence
         self._listen_t = -math.inf  # listening since (see resumed)
@@ -137,9 +155,9 @@ class SpeedMonitor:
         self._slow_since = math.nan
         self._last_part_t = math.nan
         self._transit = math.nan
-        self._arrivals: dict[tuple[int, int], float] = {}  # (sensor, part) -> rising edge time
+        first, second = self.config.transit_pair
+        self._transits = TransitTimer(first, second, self.config.transit_distance_m)
         self._covered_since: dict[int, float] = {}  # sensor -> time its part arrived
-        self._entry_queue: deque[float] = deque()  # first-sensor arrivals without a part id
         self._exits: deque[float] = deque()
         self.time_jumps = 0
 
@@ -175,15 +193,19 @@ class SpeedMonitor:
         self._driving = driving
         self._target = target_speed_mps
 
-    def on_estimate(self, t: float, mean_speed_mps: float, confidence: float) -> None:
-        """An estimate message: its speed counts when it is finite and at least
-        ``min_confidence`` sure; any message shows that the estimator is alive."""
+    def on_estimate(
+        self, t: float, mean_speed_mps: float, confidence: float, uncertainty_mps: float = 0.0
+    ) -> None:
+        """An estimate message: its speed counts when it is finite, has a finite uncertainty and
+        is at least ``min_confidence`` sure; any message shows that the estimator is alive."""
         self._advance(t)
         self._heard_t = t
         self._heard_confidence = confidence
         self._heard_finite = math.isfinite(mean_speed_mps)
-        if math.isfinite(mean_speed_mps) and confidence >= self.config.min_confidence:
+        usable = math.isfinite(mean_speed_mps) and math.isfinite(uncertainty_mps)
+        if usable and uncertainty_mps >= 0.0 and confidence >= self.config.min_confidence:
             self._speed = mean_speed_mps
+            self._sigma = uncertainty_mps
             self._speed_t = t
 
     def on_sensor_edge(
@@ -200,24 +222,13 @@ class SpeedMonitor:
         self._advance(t)
         self._last_part_t = t
         stamp = t if edge_t is None or not math.isfinite(edge_t) else edge_t
-        first, second = self.config.transit_pair
         if present:
             self._covered_since[sensor] = t
-            if sensor == first:
-                if part is None:
-                    self._entry_queue.append(stamp)
-                else:
-                    self._arrivals[(first, part)] = stamp
-            elif sensor == second:
-                start = (
-                    self._arrivals.pop((first, part), math.nan)
-                    if part is not None
-                    else (self._entry_queue.popleft() if self._entry_queue else math.nan)
-                )
-                if math.isfinite(start) and stamp > start:
-                    self._transit = self.config.transit_distance_m / (stamp - start)
         else:
             self._covered_since.pop(sensor, None)
+        transit = self._transits.on_edge(stamp, sensor, part, present)
+        if transit is not None:
+            self._transit = transit.speed_mps
 
     def on_exit(self, t: float) -> None:
         self._advance(t)
@@ -258,22 +269,7 @@ class SpeedMonitor:
         else:
             self._slow_since = math.nan
 
-        # under/overspeed against the target, with hysteresis
-        if self._driving and fresh and math.isfinite(self._target) and self._target != 0.0:
-            error = (speed - self._target) / abs(self._target)
-            if abs(error) > cfg.speed_tolerance:
-                if math.isnan(self._speed_error_since):
-                    self._speed_error_since = t
-                if t - self._speed_error_since >= cfg.alarm_delay_s:
-                    self._speed_alarm = Alarm.UNDERSPEED if error < 0 else Alarm.OVERSPEED
-            else:
-                self._speed_error_since = math.nan
-                if abs(error) < cfg.speed_tolerance * cfg.clear_ratio:
-                    self._speed_alarm = 0
-        else:
-            self._speed_error_since = math.nan
-            self._speed_alarm = 0
-        alarms |= self._speed_alarm
+        alarms |= self._judge_speed(t, speed if fresh else math.nan)
 
         if (
             self._driving
@@ -300,9 +296,11 @@ class SpeedMonitor:
             message = f"no confident speed estimate for {since:.1f} s ({why})"
         elif not self._driving:
             message = "idle"
+        elif math.isfinite(self._target) and fresh:
+            level, message = self._target_message(speed)
         elif math.isfinite(self._target):
             # not "at target" before an estimate says so (sensor timeout raises after a while)
-            message = "at target" if fresh else "waiting for a speed estimate"
+            message = "waiting for a speed estimate"
         else:
             message = "running (no target)"
         details = {
@@ -317,15 +315,53 @@ class SpeedMonitor:
             ),
             "time_jumps_back": str(self.time_jumps),
             "last_estimate_confidence": f"{self._heard_confidence:.3f}",
+            "estimate_uncertainty_mps": f"{self._sigma:.3g}" if fresh else "nan",
         }
         return MonitorStatus(
             t_s=t,
             target_speed_mps=self._target,
             estimated_speed_mps=speed,
+            estimated_speed_uncertainty_mps=self._sigma if fresh else math.nan,
             transit_speed_mps=self._transit,
             feed_rate_ppm=feed_rate,
             level=level,
             alarms=alarms,
             message=message,
             details=details,
+        )
+
+    def _judge_speed(self, t: float, speed: float) -> int:
+        """The under/overspeed alarm (with its delay and hysteresis): raised when the whole
+        interval ``speed +- interval_sigma * uncertainty`` lies beyond the tolerance."""
+        cfg = self.config
+        target = self._target
+        if not (self._driving and math.isfinite(speed) and math.isfinite(target) and target != 0):
+            self._speed_error_since = math.nan
+            self._speed_alarm = 0
+            return 0
+        error = (speed - target) / abs(target)
+        margin = cfg.interval_sigma * self._sigma / abs(target)
+        if abs(error) - margin > cfg.speed_tolerance:
+            if math.isnan(self._speed_error_since):
+                self._speed_error_since = t
+            if t - self._speed_error_since >= cfg.alarm_delay_s:
+                self._speed_alarm = Alarm.UNDERSPEED if error < 0 else Alarm.OVERSPEED
+        else:
+            self._speed_error_since = math.nan
+            if abs(error) < cfg.speed_tolerance * cfg.clear_ratio:
+                self._speed_alarm = 0
+        return self._speed_alarm
+
+    def _target_message(self, speed: float) -> tuple[int, str]:
+        """At target only when the whole interval lies within the tolerance; an interval that
+        reaches beyond it cannot confirm the target (a warning)."""
+        cfg = self.config
+        target = self._target
+        half = cfg.interval_sigma * self._sigma
+        shown = f"{1e3 * speed:.2f} +- {1e3 * half:.2f} mm/s"
+        if abs(speed - target) + half <= cfg.speed_tolerance * abs(target):
+            return OK, f"at target ({shown})"
+        return WARN, (
+            f"the estimate cannot confirm the target: {shown} against {1e3 * target:.2f} mm/s "
+            f"+- {100 * cfg.speed_tolerance:g} % (part model not calibrated yet?)"
         )

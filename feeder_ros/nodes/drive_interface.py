@@ -25,7 +25,7 @@ from __future__ import annotations
 import math
 import os
 from pathlib import Path
-from typing import Any
+from typing import TYPE_CHECKING, Any
 
 from diagnostic_msgs.msg import DiagnosticArray, DiagnosticStatus, KeyValue
 from rcl_interfaces.msg import SetParametersResult
@@ -33,7 +33,6 @@ from rclpy.duration import Duration
 from rclpy.exceptions import InvalidTopicNameException
 from rclpy.expand_topic_name import expand_topic_name
 from rclpy.lifecycle import LifecycleNode, LifecycleState, TransitionCallbackReturn
-from rclpy.parameter import Parameter
 from rclpy.qos import QoSProfile, ReliabilityPolicy
 from rclpy.time import Time
 from rclpy.validate_full_topic_name import validate_full_topic_name
@@ -69,10 +68,15 @@ from feeder_ros.nodes.drive_interface_parameters import (
     register_map_from,
     tracker_settings_from,
 )
+from feeder_ros.nodes.drive_speed_feedback import SpeedFeedback
 from feeder_ros.nodes.ros_parameters import declare_parameters, validator
 from feeder_ros.nodes.runner import run_node
+from feeder_ros.physics.parameters import FeederParameters
 from feeder_ros.physics.simulation import limited_threads
 from feeder_ros.srv import SetDrive, SetTargetSpeed
+
+if TYPE_CHECKING:
+    from feeder_ros.ros_compat import AnyParameter
 
 RELIABLE = QoSProfile(depth=10, reliability=ReliabilityPolicy.RELIABLE)
 #: threads a speed table not yet cached is simulated on at configure: one core is left to the
@@ -206,6 +210,7 @@ class DriveInterface(LifecycleNode):
         self._tracking_note = "not configured"  # why tracking is not active
         self._tracking_refused: tuple[float, float, float] | None = None  # start point refused
         self._tracking_mode = TrackerMode.OFF  # as last logged
+        self._speed_feedback = SpeedFeedback(self, self._values, self._apply_point)
         self._last_output = DriveOutput(False, 0.0, 0.0, 0.0)
         # plain publishers: they exist unconfigured, and keep publishing the ramp to zero after
         # deactivate (lifecycle publishers would fall silent at once)
@@ -225,7 +230,7 @@ class DriveInterface(LifecycleNode):
     def _now(self) -> float:
         return float(self.get_clock().now().nanoseconds) * 1e-9
 
-    def _refuse_configure_time_changes(self, parameters: list[Parameter]) -> SetParametersResult:
+    def _refuse_configure_time_changes(self, parameters: list[AnyParameter]) -> SetParametersResult:
         """A parameter read at configure changes only while the node is unconfigured: changed
         later, it would not act until the next configure, while drive/state and the diagnostics
         already reported it (a backend, a feedback topic that is not the one in use)."""
@@ -240,7 +245,7 @@ class DriveInterface(LifecycleNode):
                 )
         return SetParametersResult(successful=True)
 
-    def _apply_parameters(self, parameters: list[Parameter]) -> None:
+    def _apply_parameters(self, parameters: list[AnyParameter]) -> None:
         changed = {p.name for p in parameters if p.name in PARAMETERS}
         for parameter in parameters:
             if parameter.name in PARAMETERS:
@@ -256,6 +261,8 @@ class DriveInterface(LifecycleNode):
             controller.watchdog.timeout_s = float(self._values["heartbeat_timeout_s"])
         if "unreachable_speed" in changed:
             controller.clamp_unreachable_speed = self._values["unreachable_speed"] == "clamp"
+        if any(name.startswith("speed_trim.") for name in changed):
+            self._speed_feedback.settings_changed()
         tracker = self._tracker
         if tracker is None:
             return
@@ -298,6 +305,12 @@ class DriveInterface(LifecycleNode):
             )
         self._backend_fault = ""
         self._backend.connect()
+        table = values["speed_model_enabled"] and not values["speed_model_file"]
+        self._speed_feedback.configure(
+            self._controller,
+            plant_from(values),
+            (lambda plant: self._speed_table(plant, values, limits)) if table else None,
+        )
         self._tracker = ResonanceTracker(tracker_settings_from(values), limits)
         self._tracking_refused = None
         self._tracking_note = "waiting for target-speed mode"
@@ -333,12 +346,18 @@ class DriveInterface(LifecycleNode):
             return None
         if values["speed_model_file"]:
             return self._identified_speed_model(Path(values["speed_model_file"]), values, limits)
+        return self._speed_table(plant_from(values), values, limits)
+
+    def _speed_table(
+        self, plant: FeederParameters, values: dict[str, Any], limits: DriveLimits
+    ) -> SpeedModel:
+        """The physics table for ``plant`` (from the cache, or simulated and stored)."""
         cache = values["speed_model_cache_dir"]
-        # a table not yet cached is simulated here, in the configure transition: leave a core to
+        # a table not yet cached is simulated here (configure, a calibration): leave a core to
         # the live nodes beside this one (a 2-core machine starved the simulator and estimator)
         with limited_threads(SPEED_TABLE_THREADS):
             model, path, loaded = cached_speed_table(
-                plant_from(values),
+                plant,
                 limits,
                 Path(cache).expanduser() if cache else default_cache_dir(),
                 values["speed_model_frequency_steps"],
@@ -402,6 +421,7 @@ class DriveInterface(LifecycleNode):
         self._tracker = None
         self._tracking_note = "not configured"
         self._tracking_mode = TrackerMode.OFF
+        self._speed_feedback.teardown()
         if self._feedback_sub is not None:
             self.destroy_subscription(self._feedback_sub)
             self._feedback_sub = None
@@ -457,6 +477,8 @@ class DriveInterface(LifecycleNode):
             else:
                 self.get_logger().info("backend fault cleared (reset_fault to resume)")
         self._run_tracker(controller, now)
+        tracking = self._tracker is not None and self._tracker.mode is not TrackerMode.OFF
+        self._speed_feedback.tick(controller, now, tracking)
         output = controller.tick(now, self._period_s)
         if controller.fault_reason != self._logged_fault:
             # every fault latched here (the heartbeat watchdog, ...) is logged once; a backend
@@ -570,15 +592,26 @@ class DriveInterface(LifecycleNode):
     def _apply_tracker(
         self, controller: DriveController, now: float, command: TrackerCommand
     ) -> None:
-        """The tracker's set point through the controller's own checks, limits and ramps, with
+        self._apply_point(
+            controller, now, command.frequency_hz, command.amplitude_percent, "resonance tracking"
+        )
+
+    def _apply_point(
+        self,
+        controller: DriveController,
+        now: float,
+        frequency_hz: float,
+        amplitude_percent: float,
+        who: str,
+    ) -> None:
+        """A loop's set point through the controller's own checks, limits and ramps, with
         target-speed mode (and its target) kept."""
         speed_mode, target = controller.speed_mode, controller.target_speed_mps
-        answer = controller.set_drive(now, command.frequency_hz, command.amplitude_percent, 0.0)
+        answer = controller.set_drive(now, frequency_hz, amplitude_percent, 0.0)
         controller.speed_mode, controller.target_speed_mps = speed_mode, target
         if answer.outcome is Outcome.REFUSED:
             self.get_logger().warning(
-                f"resonance tracking set point refused: {answer.reason}",
-                throttle_duration_sec=5.0,
+                f"{who} set point refused: {answer.reason}", throttle_duration_sec=5.0
             )
 
     def _log_tracking_mode(self, now: float) -> None:
@@ -657,6 +690,8 @@ class DriveInterface(LifecycleNode):
             "heartbeat timeout s": f"{controller.watchdog.timeout_s:g}",
             "fault_reason": controller.fault_reason,
             "speed model": self._speed_source,
+            "speed model calibration": self._speed_feedback.calibration_note,
+            "speed trim": self._speed_feedback.trim_note,
             "backend connected": str(status.connected),
             "backend fault": status.fault,
             "backend warning": status.warning,

@@ -327,6 +327,57 @@ TRACKING_PARAMETERS = (
         exclusive_minimum=True,
     ),
 )
+SPEED_FEEDBACK_PARAMETERS = (
+    ParameterSpec(
+        "calibration_topic",
+        str,
+        "",
+        "the estimator's part calibration (feeder_ros/PartCalibration, latched): the physics "
+        "speed table follows the calibrated friction; empty: the configured friction"
+        + _AT_CONFIGURE,
+    ),
+    ParameterSpec(
+        "speed_trim.enabled",
+        bool,
+        "",
+        "target-speed mode: trim the amplitude on the estimate once it is trustworthy (below "
+        "speed_trim.max_uncertainty of the target)",
+    ),
+    ParameterSpec(
+        "speed_trim.estimate_topic",
+        str,
+        "",
+        "the estimate the trim reads (feeder_ros/VehicleEstimate)" + _AT_CONFIGURE,
+    ),
+    ParameterSpec(
+        "speed_trim.gain",
+        float,
+        "1",
+        "speed trim: fraction of the relative speed error corrected per step",
+        0.0,
+        2.0,
+        exclusive_minimum=True,
+    ),
+    ParameterSpec(
+        "speed_trim.max_step",
+        float,
+        "1",
+        "speed trim: largest relative amplitude change per step",
+        0.0,
+        2.0,
+        exclusive_minimum=True,
+    ),
+    ParameterSpec(
+        "speed_trim.max_uncertainty",
+        float,
+        "1",
+        "speed trim: estimates with a standard uncertainty above this fraction of the target "
+        "are not used",
+        0.0,
+        2.0,
+        exclusive_minimum=True,
+    ),
+)
 PLANT_PARAMETERS = tuple(
     replace(
         spec,
@@ -339,7 +390,13 @@ PLANT_PARAMETERS = tuple(
 )
 PARAMETERS: dict[str, ParameterSpec] = {
     spec.name: spec
-    for spec in (*LIMIT_PARAMETERS, *NODE_PARAMETERS, *TRACKING_PARAMETERS, *PLANT_PARAMETERS)
+    for spec in (
+        *LIMIT_PARAMETERS,
+        *NODE_PARAMETERS,
+        *SPEED_FEEDBACK_PARAMETERS,
+        *TRACKING_PARAMETERS,
+        *PLANT_PARAMETERS,
+    )
 }
 #: parameters the node reads when it is configured: changed only while it is unconfigured
 AT_CONFIGURE = frozenset(
@@ -405,10 +462,16 @@ DEFAULTS: dict[str, Any] = {
     "modbus.scale.ramp_time_counts_per_s": _MAP.ramp_time_counts_per_s,
     "modbus.status_running_bit": _MAP.status_running_bit,
     "modbus.status_alarm_bit": _MAP.status_alarm_bit,
+    "calibration_topic": "calibration",
+    "speed_trim.enabled": True,
+    "speed_trim.estimate_topic": "estimate",
+    "speed_trim.gain": 0.6,
+    "speed_trim.max_step": 0.15,
+    "speed_trim.max_uncertainty": 0.03,
     "tracking.enabled": False,
     "tracking.feedback_topic": "estimate",
     "tracking.feedback_type": "vehicle_estimate",
-    "tracking.min_confidence": 0.5,
+    "tracking.min_confidence": 0.0,
     **{f"tracking.{name}": getattr(_TRACKER, name) for name in TRACKER_FIELDS},
     **{
         PLANT_PREFIX + name: value

@@ -18,7 +18,7 @@ import dataclasses
 import math
 import threading
 import time
-from typing import Any
+from typing import TYPE_CHECKING, Any
 
 import numpy as np
 from builtin_interfaces.msg import Time as TimeMsg
@@ -26,7 +26,6 @@ from diagnostic_msgs.msg import DiagnosticArray, DiagnosticStatus, KeyValue
 from rclpy.clock import Clock
 from rclpy.clock_type import ClockType
 from rclpy.node import Node
-from rclpy.parameter import Parameter
 from rclpy.qos import DurabilityPolicy, HistoryPolicy, QoSProfile, ReliabilityPolicy
 from rclpy.time import Time
 from rosgraph_msgs.msg import Clock as ClockMessage
@@ -54,6 +53,9 @@ from feeder_ros.physics.simulation import EventKind, FeederSimulator, PartSpec, 
 from feeder_ros.sensors.accelerometer import AccelerometerModel
 from feeder_ros.sensors.part_presence import PartSensorArray
 from feeder_ros.srv import SpawnParts
+
+if TYPE_CHECKING:
+    from feeder_ros.ros_compat import AnyParameter
 
 PHYSICS_DEFAULTS = FeederParameters().as_dict()
 #: drive commands beyond these are refused as malformed (no exciter comes near them, and the
@@ -248,7 +250,7 @@ class PlatformSimulator(Node):
     def _physics(self) -> FeederParameters:
         return FeederParameters.from_mapping({k: self._values[k] for k in PARAMETER_SPECS})
 
-    def _apply_parameters(self, parameters: list[Parameter]) -> None:
+    def _apply_parameters(self, parameters: list[AnyParameter]) -> None:
         changed = {p.name for p in parameters if p.name in PARAMETERS}
         with self._lock:
             for parameter in parameters:
@@ -274,6 +276,8 @@ class PlatformSimulator(Node):
                 "imu_bias_mps2",
                 "imu_saturation_mps2",
                 "imu_seed",
+                "imu_gain",
+                "imu_misalignment_deg",
             }:
                 self._accelerometer = self._make_accelerometer()
             if "feed_interval_s" in changed:
@@ -290,6 +294,8 @@ class PlatformSimulator(Node):
             saturation=self._values["imu_saturation_mps2"],
             gravity=self._values["gravity_mps2"],
             seed=self._values["imu_seed"],
+            gain=self._values["imu_gain"],
+            misalignment_deg=self._values["imu_misalignment_deg"],
         )
 
     def _start(self) -> None:

@@ -9,7 +9,7 @@ from __future__ import annotations
 
 import sys
 from collections.abc import Callable, Iterable, Mapping
-from typing import Any
+from typing import TYPE_CHECKING, Any
 
 from rcl_interfaces.msg import (
     FloatingPointRange,
@@ -19,9 +19,11 @@ from rcl_interfaces.msg import (
     SetParametersResult,
 )
 from rclpy.node import Node
-from rclpy.parameter import Parameter
 
 from feeder_ros.physics.parameters import ParameterError, ParameterSpec
+
+if TYPE_CHECKING:
+    from feeder_ros.ros_compat import AnyParameter
 
 _ROS_TYPES = {
     float: ParameterType.PARAMETER_DOUBLE,
@@ -79,12 +81,12 @@ def declare_parameters(
 
 def _fixed_clock(
     use_sim_time: bool,
-) -> Callable[[list[Parameter]], SetParametersResult]:
+) -> Callable[[list[AnyParameter]], SetParametersResult]:
     """An on-set-parameters callback refusing a change of ``use_sim_time``: the feeder nodes
     choose their clock at start-up (timers, watchdogs, the simulator's /clock publisher), and a
     switch to sim time with no /clock would freeze a drive's watchdog."""
 
-    def callback(parameters: list[Parameter]) -> SetParametersResult:
+    def callback(parameters: list[AnyParameter]) -> SetParametersResult:
         for parameter in parameters:
             if parameter.name == "use_sim_time" and parameter.value != use_sim_time:
                 return SetParametersResult(
@@ -118,7 +120,7 @@ def validator(
     specs: Mapping[str, ParameterSpec],
     check_all: Callable[[dict[str, Any]], object] | None = None,
     current: Callable[[], Mapping[str, Any]] | None = None,
-) -> Callable[[list[Parameter]], SetParametersResult]:
+) -> Callable[[list[AnyParameter]], SetParametersResult]:
     """An on-set-parameters callback that validates each value, then the combination.
 
     ``check_all(values)`` sees the current values with the proposed changes applied and raises
@@ -126,7 +128,7 @@ def validator(
     has no side effects: nodes apply accepted changes in a post-set callback.
     """
 
-    def callback(parameters: list[Parameter]) -> SetParametersResult:
+    def callback(parameters: list[AnyParameter]) -> SetParametersResult:
         proposed = dict(current()) if current is not None else {}
         try:
             for parameter in parameters:

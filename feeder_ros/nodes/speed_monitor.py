@@ -14,11 +14,10 @@ from __future__ import annotations
 import math
 import threading
 import time
-from typing import Any
+from typing import TYPE_CHECKING, Any
 
 from diagnostic_msgs.msg import DiagnosticArray, DiagnosticStatus, KeyValue
 from rclpy.node import Node
-from rclpy.parameter import Parameter
 from rclpy.qos import QoSProfile, ReliabilityPolicy
 
 from feeder_ros.monitoring.speed_monitor import MonitorConfig, SpeedMonitor
@@ -35,6 +34,9 @@ from feeder_ros.nodes.ros_parameters import declare_parameters, validator
 from feeder_ros.nodes.runner import run_node
 from feeder_ros.nodes.stall_detector import StallDetector
 from feeder_ros.physics.parameters import ParameterError, ParameterSpec
+
+if TYPE_CHECKING:
+    from feeder_ros.ros_compat import AnyParameter
 
 _TIMES = (
     ("alarm_delay_s", "a speed error must last this long to raise under/overspeed"),
@@ -82,9 +84,20 @@ PARAMETERS: dict[str, ParameterSpec] = {
             "min_confidence",
             float,
             "1",
-            "estimates below this confidence give no speed (the estimator counts as alive)",
+            "estimates below this confidence give no speed (the estimator counts as alive); 0: "
+            "judge by the uncertainty alone",
             0.0,
             1.0,
+        ),
+        ParameterSpec(
+            "interval_sigma",
+            float,
+            "1",
+            "the judged interval: the estimate +- this many standard uncertainties (2: 95 %); "
+            "at target only when it lies wholly within the tolerance",
+            minimum=0.0,
+            maximum=10.0,
+            exclusive_minimum=True,
         ),
         *(
             ParameterSpec(name, float, "s", text, minimum=0.0, exclusive_minimum=True)
@@ -112,7 +125,8 @@ DEFAULTS: dict[str, Any] = {
     "speed_tolerance": 0.15,
     "clear_ratio": 0.6,
     "stall_speed_mps": 0.5e-3,
-    "min_confidence": 0.5,
+    "min_confidence": 0.0,
+    "interval_sigma": 2.0,
     "alarm_delay_s": 2.0,
     "stall_time_s": 3.0,
     "starvation_time_s": 30.0,
@@ -178,6 +192,7 @@ def _config(values: dict[str, Any]) -> MonitorConfig:
         clear_ratio=values["clear_ratio"],
         alarm_delay_s=values["alarm_delay_s"],
         min_confidence=values["min_confidence"],
+        interval_sigma=values["interval_sigma"],
         stall_speed_mps=values["stall_speed_mps"],
         stall_time_s=values["stall_time_s"],
         starvation_time_s=values["starvation_time_s"],
@@ -219,7 +234,7 @@ class SpeedMonitorNode(Node):
     def _now(self) -> float:
         return float(self.get_clock().now().nanoseconds) * 1e-9
 
-    def _apply_parameters(self, parameters: list[Parameter]) -> None:
+    def _apply_parameters(self, parameters: list[AnyParameter]) -> None:
         for parameter in parameters:
             if parameter.name in PARAMETERS:
                 self._values[parameter.name] = parameter.value
@@ -229,7 +244,10 @@ class SpeedMonitorNode(Node):
     def _on_estimate(self, message: VehicleEstimate) -> None:
         with self._lock:
             self._monitor.on_estimate(
-                self._now(), message.mean_speed_mps, message.mean_speed_confidence
+                self._now(),
+                message.mean_speed_mps,
+                message.mean_speed_confidence,
+                message.mean_speed_uncertainty_mps,
             )
 
     def _on_edge(self, message: PartSensorEvent) -> None:
@@ -281,6 +299,7 @@ class SpeedMonitorNode(Node):
         message.header.stamp = self.get_clock().now().to_msg()
         message.target_speed_mps = status.target_speed_mps
         message.estimated_speed_mps = status.estimated_speed_mps
+        message.estimated_speed_uncertainty_mps = status.estimated_speed_uncertainty_mps
         message.transit_speed_mps = status.transit_speed_mps
         message.feed_rate_ppm = status.feed_rate_ppm
         message.level = status.level

@@ -18,17 +18,17 @@ import math
 import struct
 import threading
 import time
-from typing import Any
+from typing import TYPE_CHECKING, Any
 
 import numpy as np
 from diagnostic_msgs.msg import DiagnosticArray, DiagnosticStatus, KeyValue
 from rclpy.exceptions import InvalidHandle
 from rclpy.node import Node
-from rclpy.parameter import Parameter
 from rclpy.qos import QoSProfile, ReliabilityPolicy
 from rclpy.qos_overriding_options import QoSOverridingOptions
 from sensor_msgs.msg import Imu
 
+from feeder_ros.estimation.part_belief import PartBelief
 from feeder_ros.estimation.stick_slip_observer import PartModel
 from feeder_ros.estimation.vehicle_estimator import (
     EstimatorConfig,
@@ -38,6 +38,8 @@ from feeder_ros.estimation.vehicle_estimator import (
 from feeder_ros.estimation.vehicle_estimator import VehicleEstimate as EstimateRecord
 from feeder_ros.msg import AccelerometerBatch, CarrierState, DriveCommand, VehicleEstimate
 from feeder_ros.node_interfaces import NodeInterface, TopicSpec
+from feeder_ros.nodes import estimator_calibration as calibration
+from feeder_ros.nodes.estimator_calibration import EstimatorCalibration, measurement_source
 from feeder_ros.nodes.ros_parameters import declare_parameters, validator
 from feeder_ros.nodes.runner import run_node
 from feeder_ros.nodes.stall_detector import StallDetector
@@ -47,6 +49,9 @@ from feeder_ros.physics.parameters import (
     ParameterError,
     ParameterSpec,
 )
+
+if TYPE_CHECKING:
+    from feeder_ros.ros_compat import AnyParameter
 
 _AXES = ("x", "y", "z")
 _PART_PARAMETERS = ("static_friction", "kinetic_friction", "groove_angle_deg", "gravity_mps2")
@@ -126,6 +131,7 @@ PARAMETERS: dict[str, ParameterSpec] = {
             ),
         )
     },
+    **calibration.PARAMETERS,
 }
 DEFAULTS: dict[str, Any] = {
     **{name: getattr(FeederParameters(), name) for name in _PART_PARAMETERS},
@@ -140,6 +146,7 @@ DEFAULTS: dict[str, Any] = {
     "use_carrier_state": False,
     "input_timeout_s": 1.0,
     "startup_timeout_s": 10.0,
+    **calibration.DEFAULTS,
 }
 DIAGNOSTICS_PERIOD_S = 1.0  # the diagnostics timer's period (a later tick: the node stalled)
 #: an accelerometer batch with a longer sample period is refused (the estimator needs a fast
@@ -158,14 +165,17 @@ INTERFACE = NodeInterface(
             "estimate",
             "feeder_ros/msg/VehicleEstimate",
             "reliable, depth 10",
-            "part velocity, phase, advance per cycle, slip fraction, mean speed, confidences",
+            "part velocity and mean speed with their standard uncertainties (mean speed NaN while "
+            "SETTLING), phase, advance per cycle, slip fraction, confidences",
         ),
         TopicSpec(
             "/diagnostics",
             "diagnostic_msgs/msg/DiagnosticArray",
             "reliable, depth 10",
-            "estimator status at 1 Hz (input gaps, invalid samples, timeouts)",
+            "estimator status at 1 Hz (input gaps, invalid samples, timeouts) and the "
+            "calibration's (file problems, refused measurements)",
         ),
+        *calibration.PUBLISHES,
     ),
     subscribes=(
         TopicSpec(
@@ -192,7 +202,9 @@ INTERFACE = NodeInterface(
             "reliable, depth 1000",
             "carrier displacement, used when use_carrier_state is true",
         ),
+        *calibration.SUBSCRIBES,
     ),
+    services=calibration.SERVICES,
     parameters=PARAMETERS,
 )
 
@@ -241,14 +253,20 @@ def _check_combination(values: dict[str, Any]) -> None:
             f"min_drive_frequency_hz={low:g} Hz must be below max_drive_frequency_hz={high:g} Hz"
         )
     _build_estimator(values)
+    measurement_source(values)
 
 
-def _build_estimator(values: dict[str, Any]) -> VehicleEstimator:
-    """A fresh estimator for these parameter values (raises ParameterError naming a bad one)."""
+def _nominal_part(values: dict[str, Any]) -> PartModel:
     kappa = 1.0 / math.sin(math.radians(values["groove_angle_deg"]) / 2.0)
-    part = PartModel(
+    return PartModel(
         values["static_friction"], values["kinetic_friction"], kappa, values["gravity_mps2"]
     )
+
+
+def _build_estimator(values: dict[str, Any], belief: PartBelief | None = None) -> VehicleEstimator:
+    """A fresh estimator for these parameter values (raises ParameterError naming a bad one),
+    running ``belief`` (default: the nominal part with the stated uncertainties)."""
+    part = _nominal_part(values)
     fit_window = values["fit_window_s"]
     config = EstimatorConfig(
         part=part,
@@ -259,8 +277,10 @@ def _build_estimator(values: dict[str, Any]) -> VehicleEstimator:
         max_bridge_s=values["max_bridge_s"],
         frequency_band_hz=(values["min_drive_frequency_hz"], values["max_drive_frequency_hz"]),
         batch_interval_s=0.0,  # the node already batches per publish period
+        friction_uncertainty=values["calibration.friction_uncertainty"],
+        gain_uncertainty=values["calibration.gain_uncertainty"],
     )
-    return VehicleEstimator(config)
+    return VehicleEstimator(config, belief)
 
 
 class VehicleEstimatorNode(Node):
@@ -288,6 +308,10 @@ class VehicleEstimatorNode(Node):
         self._listening_since = self._last_input
         self._record: EstimateRecord = self._estimator.last_estimate
         self._axis = _AXES.index(self._values["imu_axis"])
+        self._calibration = EstimatorCalibration(
+            self, self._lock, lambda: self._estimator, _nominal_part(self._values), self._values
+        )
+        self._estimator.set_belief(self._calibration.belief)  # e.g. read from the file
 
         self._publisher = self.create_publisher(VehicleEstimate, "estimate", 10)
         self._diagnostics = self.create_publisher(DiagnosticArray, "/diagnostics", 10)
@@ -313,7 +337,7 @@ class VehicleEstimatorNode(Node):
         self.create_timer(DIAGNOSTICS_PERIOD_S, self._publish_diagnostics)
 
     # -- parameters ----------------------------------------------------------------------------
-    def _apply_parameters(self, parameters: list[Parameter]) -> None:
+    def _apply_parameters(self, parameters: list[AnyParameter]) -> None:
         changed = False
         for parameter in parameters:
             if parameter.name in PARAMETERS:
@@ -321,7 +345,10 @@ class VehicleEstimatorNode(Node):
                 changed = True
         if changed:
             with self._lock:  # a new nominal part or window: start over
-                self._estimator = _build_estimator(self._values)
+                nominal = _nominal_part(self._values)
+                if nominal != self._calibration.belief.nominal:
+                    self._calibration.renominate(nominal)
+                self._estimator = _build_estimator(self._values, self._calibration.belief)
                 if self._drive is not None:  # the drive in force is still in force
                     self._estimator.set_drive(*self._drive)
                 self._record = self._estimator.last_estimate
@@ -445,6 +472,7 @@ class VehicleEstimatorNode(Node):
         for name in (
             "carrier_velocity_mps",
             "part_velocity_mps",
+            "part_velocity_uncertainty_mps",
             "part_velocity_confidence",
             "phase_confidence",
             "advance_per_cycle_m",
@@ -452,6 +480,7 @@ class VehicleEstimatorNode(Node):
             "slip_fraction",
             "slip_fraction_confidence",
             "mean_speed_mps",
+            "mean_speed_uncertainty_mps",
             "mean_speed_confidence",
             "window_s",
         ):
@@ -493,6 +522,7 @@ class VehicleEstimatorNode(Node):
             "samples_received": str(received),
             "drive_frequency_hz": f"{record.drive_frequency_hz:.4g}",
             "mean_speed_mps": f"{record.mean_speed_mps:.6g}",
+            "mean_speed_uncertainty_mps": f"{record.mean_speed_uncertainty_mps:.3g}",
             "mean_speed_confidence": f"{record.mean_speed_confidence:.3f}",
             "slip_fraction": f"{record.slip_fraction:.4g}",
             "stalls_seen": str(self._stalls.stalls),
@@ -504,7 +534,10 @@ class VehicleEstimatorNode(Node):
             message=text,
             values=[KeyValue(key=k, value=v) for k, v in values.items()],
         )
-        array = DiagnosticArray(status=[status])
+        part_model = self._calibration.diagnostic_status(
+            f"{self.get_fully_qualified_name()}: part model"
+        )
+        array = DiagnosticArray(status=[status, part_model])
         array.header.stamp = self.get_clock().now().to_msg()
         self._diagnostics.publish(array)
 

@@ -87,7 +87,7 @@ def test_track_full_when_a_sensor_stays_covered() -> None:
 
 
 def test_sensor_timeout_when_estimates_stop() -> None:
-    monitor = SpeedMonitor(MonitorConfig(sensor_timeout_s=2.0))
+    monitor = SpeedMonitor(MonitorConfig(sensor_timeout_s=2.0, min_confidence=0.5))
     monitor.on_drive(0.0, True, math.nan)
     _run(monitor, 0.0, 3.0, 0.01)
     assert monitor.evaluate(4.0).alarms == 0
@@ -114,7 +114,7 @@ def test_the_monitors_own_stall_is_not_the_inputs_silence() -> None:
     monitor = SpeedMonitor(config)
     monitor.on_drive(0.0, True, TARGET)
     monitor.on_sensor_edge(0.0, 0, 1, True)  # the last part seen; its sensor stays covered
-    assert _run(monitor, 0.0, 3.0, TARGET).message == "at target"
+    assert _run(monitor, 0.0, 3.0, TARGET).message == "at target (20.00 +- 0.00 mm/s)"
     for t in (5.6, 6.0, 6.6, 8.0, 8.6):
         if t <= 6.6:
             monitor.resumed(t)
@@ -154,7 +154,7 @@ def test_an_estimator_settling_after_a_start_is_a_warning_not_a_sensor_timeout()
     monitor.on_estimate(4.0, math.nan, 0.9)  # sure of nothing: still no speed
     assert monitor.evaluate(4.0).message == "no confident speed estimate for 4.0 s (no speed in it)"
     status = _run(monitor, 4.1, 4.5, TARGET)
-    assert (status.level, status.alarms, status.message) == (0, 0, "at target")
+    assert (status.level, status.alarms, status.message) == (0, 0, "at target (20.00 +- 0.00 mm/s)")
 
 
 def test_transit_speed_by_part_id_and_first_in_first_out() -> None:
@@ -249,7 +249,7 @@ def test_no_at_target_before_an_estimate_says_so() -> None:
     monitor.on_drive(0.0, True, TARGET)
     status = monitor.evaluate(1.0)  # driving, no estimate yet: not "at target"
     assert (status.level, status.alarms, status.message) == (0, 0, "waiting for a speed estimate")
-    assert _run(monitor, 1.1, 1.5, TARGET).message == "at target"
+    assert _run(monitor, 1.1, 1.5, TARGET).message == "at target (20.00 +- 0.00 mm/s)"
     assert monitor.evaluate(4.0).alarms == Alarm.SENSOR_TIMEOUT  # estimates stopped
 
 
@@ -267,3 +267,34 @@ def test_new_limits_keep_the_raised_alarms_and_the_history() -> None:
     assert again.feed_rate_ppm == pytest.approx(3 * 60.0 / 6.05)  # the 3 exits still counted
     assert again.target_speed_mps == TARGET
     assert monitor.config.speed_tolerance == 0.3
+
+
+def test_speed_is_judged_against_the_estimate_s_interval() -> None:
+    """At target only when the whole 95 % interval lies within the tolerance; an alarm only when
+    the whole interval lies beyond it; in between, a warning that the target is not confirmed."""
+    monitor = SpeedMonitor(MonitorConfig(speed_tolerance=0.15, alarm_delay_s=1.0))
+    monitor.on_drive(0.0, True, TARGET)
+
+    def judged(t: float, speed: float, sigma: float) -> MonitorStatus:
+        status = monitor.evaluate(t)
+        for k in range(15):
+            monitor.on_estimate(t + 0.1 * k, speed, 0.9, sigma)
+            status = monitor.evaluate(t + 0.1 * k)
+        return status
+
+    # 20.4 +- 2 * 0.5 mm/s lies within 20 +- 3 mm/s: at target
+    status = judged(1.0, 0.0204, 0.0005)
+    assert (status.level, status.alarms) == (0, 0)
+    assert status.message == "at target (20.40 +- 1.00 mm/s)"
+    assert status.estimated_speed_uncertainty_mps == 0.0005
+    # the same speed, uncalibrated (+- 8 mm/s): not confirmed, and no alarm either
+    status = judged(3.0, 0.0204, 0.004)
+    assert (status.level, status.alarms) == (1, 0)
+    assert status.message.startswith("the estimate cannot confirm the target: 20.40 +- 8.00 mm/s")
+    # 15 mm/s, 25 % slow, but +- 4 mm/s reaches into the tolerance: no underspeed alarm
+    assert judged(5.0, 0.015, 0.002).alarms == 0
+    # 15 +- 0.4 mm/s lies wholly below 17 mm/s: underspeed after the delay
+    assert judged(7.0, 0.015, 0.0002).alarms == Alarm.UNDERSPEED
+    # an estimate without a finite uncertainty gives no speed
+    monitor.on_estimate(9.0, 0.02, 1.0, math.nan)
+    assert math.isnan(monitor.evaluate(9.0 + 2.5).estimated_speed_mps)

@@ -28,7 +28,17 @@ def _same(a: Any, b: Any) -> bool:
 def _file_values(node: str, path: Path | None = None) -> dict[str, Any]:
     tree = yaml.safe_load((path or CONFIG / f"{node}.yaml").read_text(encoding="utf-8"))
     assert list(tree) == [f"/**/{node}"]
-    values: dict[str, Any] = tree[f"/**/{node}"]["ros__parameters"]
+    return _flat(tree[f"/**/{node}"]["ros__parameters"])
+
+
+def _flat(tree: dict[str, Any], prefix: str = "") -> dict[str, Any]:
+    """Nested keys joined with dots, as rcl reads them (calibration.file, say)."""
+    values: dict[str, Any] = {}
+    for key, value in tree.items():
+        if isinstance(value, dict):
+            values.update(_flat(value, f"{prefix}{key}."))
+        else:
+            values[f"{prefix}{key}"] = value
     return values
 
 

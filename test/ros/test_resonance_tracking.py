@@ -73,8 +73,10 @@ def drive_command(cache: Path) -> list[str]:
         "plant.damping_ns_per_m": str(DAMPING),  # the table's plant = the simulator, before
         "tracking.enabled": "true",
         "tracking.dither_hz": "0.3",
-        "tracking.dither_period_s": "3.0",
-        "tracking.settle_s": "0.8",  # > the estimator's fit window after each step
+        "tracking.dither_period_s": "3.6",
+        # > the estimator's time to a valid mean speed after each step (its fit window, 0.5 s,
+        # the part state's 0.2 s, half its 1 s window), with the messages' latency
+        "tracking.settle_s": "1.4",
         "tracking.gain_hz2": "1.5",
         "tracking.feedback_timeout_s": "4.0",  # a loaded machine may delay the estimator
     }
@@ -229,7 +231,7 @@ def test_tracking_follows_a_stiffness_drop_and_holds_the_target_speed(tmp_path: 
         for name, value, needle in (
             ("tracking.dither_hz", math.nan, "tracking.dither_hz"),  # (rclpy: out of range)
             ("tracking.dither_hz", 4.5, "the widest allowed interval is 8 Hz"),
-            ("tracking.settle_s", 1.5, "leaves no time to measure"),
+            ("tracking.settle_s", 1.8, "leaves no time to measure"),
             ("tracking.feedback_timeout_s", 0.5, "must exceed settle_s"),
         ):
             refused = watch.try_parameters("drive_interface", parameter(name, value))[0]

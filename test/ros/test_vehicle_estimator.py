@@ -66,9 +66,16 @@ def _feeder(stack: ExitStack, ns: str, frequency_hz: float) -> None:
             ]
         )
     )  # fmt: skip
+    # the simulator's part is the estimator's nominal part: known as after a calibration
     stack.enter_context(
-        running([str(BIN / "vehicle_estimator"), "--ros-args", "-r", f"__ns:={ns}"])
-    )
+        running(
+            [
+                str(BIN / "vehicle_estimator"), "--ros-args", "-r", f"__ns:={ns}",
+                "-p", "calibration.friction_uncertainty:=0.01",
+                "-p", "calibration.gain_uncertainty:=0.0",
+            ]
+        )
+    )  # fmt: skip
 
 
 def _true_speed(parts: list[PartStateArray], t_end_s: float, span_s: float) -> float:

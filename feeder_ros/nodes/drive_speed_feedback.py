@@ -1,0 +1,204 @@
+"""Target-speed mode on a real feeder: the calibrated part model and the speed trim (a part of the
+drive interface node).
+
+* **Calibrated speed table.** The physics speed table assumes the configured part's friction; the
+  estimator calibrates it online and publishes the result (``calibration``,
+  ``feeder_ros/PartCalibration``, latched). Each calibration that moves the friction by more than
+  0.5 % rebuilds the table (the exact engine takes well under a second for the default grid; the
+  cache keeps it) and, in target-speed mode, chooses the set point for the target again when the
+  new table picks another frequency (at the same frequency the trimmed amplitude is kept). A reset
+  calibration (state NOMINAL) returns to the configured friction. An identified speed model (a
+  file) is measured, not simulated: it is kept.
+* **Speed trim.** With ``speed_trim.enabled``, target-speed mode closes the loop on the estimate
+  (:class:`~feeder_ros.drive.speed_trim.SpeedTrim`): once the estimate is trustworthy (its
+  uncertainty below ``speed_trim.max_uncertainty`` of the target), each estimate of the current
+  setting trims the amplitude towards the target, through the controller's limits and ramps.
+  Resonance tracking, when active, trims by itself; the speed trim then stands aside.
+"""
+
+from __future__ import annotations
+
+import math
+from collections.abc import Callable
+from typing import Any
+
+from rclpy.node import Node
+from rclpy.qos import DurabilityPolicy, QoSProfile, ReliabilityPolicy
+
+from feeder_ros.drive.controller import DriveController
+from feeder_ros.drive.speed_model import SpeedModel
+from feeder_ros.drive.speed_trim import SpeedTrim, TrimSettings
+from feeder_ros.msg import PartCalibration, VehicleEstimate
+from feeder_ros.physics.parameters import FeederParameters, ParameterError
+
+__all__ = ["SpeedFeedback", "trim_settings_from"]
+
+LATCHED_QOS = QoSProfile(
+    depth=1, reliability=ReliabilityPolicy.RELIABLE, durability=DurabilityPolicy.TRANSIENT_LOCAL
+)
+ESTIMATE_QOS = QoSProfile(depth=100, reliability=ReliabilityPolicy.RELIABLE)
+#: a calibration that moves mu_s or mu_d by less than this (relative) keeps the table
+REBUILD_TOLERANCE = 0.005
+
+
+def trim_settings_from(values: dict[str, Any]) -> TrimSettings:
+    return TrimSettings(
+        gain=values["speed_trim.gain"],
+        max_step=values["speed_trim.max_step"],
+        max_uncertainty=values["speed_trim.max_uncertainty"],
+    )
+
+
+class SpeedFeedback:
+    """See the module docstring. ``apply(controller, now, frequency, amplitude, who)`` sets a
+    point through the controller keeping target-speed mode (the node's)."""
+
+    def __init__(
+        self,
+        node: Node,
+        values: dict[str, Any],
+        apply: Callable[[DriveController, float, float, float, str], None],
+    ) -> None:
+        self._node = node
+        self._values = values
+        self._apply = apply
+        self._subscriptions: list[Any] = []
+        self._controller: DriveController | None = None
+        self._rebuild: Callable[[FeederParameters], SpeedModel] | None = None
+        self._plant: FeederParameters | None = None  # the configured plant
+        self._table_plant: FeederParameters | None = None  # the one the table was built for
+        self._trim = SpeedTrim(trim_settings_from(values))
+        self._seen_point: tuple[float, float, bool] | None = None
+        self.calibration_note = "not configured"
+
+    def configure(
+        self,
+        controller: DriveController,
+        plant: FeederParameters,
+        rebuild: Callable[[FeederParameters], SpeedModel] | None,
+    ) -> None:
+        """``rebuild(plant)``: the physics table for a plant (None: no table to recalibrate)."""
+        self._controller = controller
+        self._plant = self._table_plant = plant
+        self._rebuild = rebuild
+        self._trim = SpeedTrim(trim_settings_from(self._values))
+        self._seen_point = None
+        node = self._node
+        topic = self._values["calibration_topic"]
+        if rebuild is not None and topic:
+            self._subscriptions.append(
+                node.create_subscription(PartCalibration, topic, self._on_calibration, LATCHED_QOS)
+            )
+            self.calibration_note = f"waiting for {node.resolve_topic_name(topic)}"
+        else:
+            self.calibration_note = "off (no physics table, or no calibration_topic)"
+        self._subscriptions.append(
+            node.create_subscription(
+                VehicleEstimate,
+                self._values["speed_trim.estimate_topic"],
+                self._on_estimate,
+                ESTIMATE_QOS,
+            )
+        )
+
+    def teardown(self) -> None:
+        for subscription in self._subscriptions:
+            self._node.destroy_subscription(subscription)
+        self._subscriptions = []
+        self._controller = None
+
+    def settings_changed(self) -> None:
+        self._trim.settings = trim_settings_from(self._values)
+
+    @property
+    def trim_note(self) -> str:
+        return self._trim.last_note if self._values["speed_trim.enabled"] else "off"
+
+    # -- the loop --------------------------------------------------------------------------------
+    def tick(self, controller: DriveController, now: float, tracking_active: bool) -> None:
+        """Tell the trim when a new setting is reached (or that trimming stops)."""
+        point = controller.set_point
+        seen = (point.frequency_hz, point.amplitude_percent, controller.running)
+        if not (controller.running and controller.speed_mode) or tracking_active:
+            self._trim.stop()
+            self._seen_point = None
+            return
+        if seen != self._seen_point:
+            self._seen_point = seen
+            self._trim.setting_changed(now + controller.ramp.remaining_s(now))
+
+    def _on_estimate(self, message: VehicleEstimate) -> None:
+        controller = self._controller
+        if controller is None or not self._values["speed_trim.enabled"]:
+            return
+        if not (controller.running and controller.speed_mode) or self._seen_point is None:
+            return
+        stamp = message.header.stamp
+        amplitude = self._trim.reading(
+            float(stamp.sec) + float(stamp.nanosec) * 1e-9,
+            message.window_s,
+            message.mean_speed_mps,
+            message.mean_speed_uncertainty_mps,
+            controller.target_speed_mps,
+            controller.set_point.amplitude_percent,
+        )
+        if amplitude is None:
+            return
+        now = float(self._node.get_clock().now().nanoseconds) * 1e-9
+        self._apply(controller, now, controller.set_point.frequency_hz, amplitude, "speed trim")
+        self._node.get_logger().info(
+            f"speed trim: {self._trim.last_note}: {amplitude:.2f} % for "
+            f"{1e3 * controller.target_speed_mps:g} mm/s (estimate "
+            f"{1e3 * message.mean_speed_mps:.2f} +- {1e3 * message.mean_speed_uncertainty_mps:.2f})"
+        )
+
+    # -- calibration -------------------------------------------------------------------------
+    def _on_calibration(self, message: PartCalibration) -> None:
+        controller, plant, rebuild = self._controller, self._plant, self._rebuild
+        if controller is None or plant is None or rebuild is None:
+            return
+        if message.state == PartCalibration.STATE_NOMINAL:
+            wanted = plant
+        else:
+            g_kappa = plant.gravity_mps2 * plant.friction_multiplier
+            mu_s = message.stick_limit_mps2 / g_kappa
+            mu_d = message.slip_deceleration_mps2 / g_kappa
+            try:
+                wanted = plant.with_changes(static_friction=mu_s, kinetic_friction=mu_d)
+            except (ParameterError, ValueError) as error:
+                self._node.get_logger().warning(f"calibration not used: {error}")
+                return
+        current = self._table_plant
+        assert current is not None
+        if all(
+            math.isclose(getattr(wanted, name), getattr(current, name), rel_tol=REBUILD_TOLERANCE)
+            for name in ("static_friction", "kinetic_friction")
+        ):
+            return
+        try:
+            model = rebuild(wanted)
+        except (ValueError, RuntimeError, OSError) as error:
+            self._node.get_logger().error(f"speed table for the calibrated part failed: {error}")
+            return
+        self._table_plant = wanted
+        controller.speed_model = model
+        self.calibration_note = (
+            f"table for mu_s {wanted.static_friction:.4g}, mu_d {wanted.kinetic_friction:.4g}"
+        )
+        self._node.get_logger().info(f"speed model recalibrated: {self.calibration_note}")
+        now = float(self._node.get_clock().now().nanoseconds) * 1e-9
+        if controller.speed_mode and math.isfinite(controller.target_speed_mps):
+            trimmed = controller.set_point
+            choice = model.choose(controller.target_speed_mps)
+            if choice is not None and math.isclose(choice.frequency_hz, trimmed.frequency_hz):
+                # the same frequency: the trim's amplitude already holds the target on the real
+                # feeder; a new table choice would throw its work away
+                return
+            answer = controller.set_target_speed(
+                now, controller.target_speed_mps, controller.set_ramp_time_s
+            )
+            self._node.get_logger().info(
+                f"target {1e3 * controller.target_speed_mps:g} mm/s on the recalibrated model: "
+                f"{answer.frequency_hz:.3f} Hz, {answer.amplitude_percent:.2f} % "
+                f"({answer.outcome.name.lower()}{': ' + answer.reason if answer.reason else ''})"
+            )

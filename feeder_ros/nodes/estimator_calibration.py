@@ -1,0 +1,389 @@
+"""The vehicle estimator's online calibration on the ROS graph (a part of the estimator node).
+
+Sensor transits (``parts/sensor_events``) and an operator's measured speed
+(``calibration/measured_speed``) go through the ROS-free
+:class:`~feeder_ros.estimation.online_calibration.MeasurementSource` into the
+:class:`~feeder_ros.estimation.calibration.Calibrator`; every accepted update gives the estimator
+the new part belief, is published (latched) on ``calibration`` and written to
+``calibration.file`` (atomically). ``calibration/reset`` returns to the nominal part. A calibration
+file that cannot be used at start (corrupt, foreign, another version) is reported (ERROR log,
+WARN in ``/diagnostics``) and the node runs on the nominal part.
+"""
+
+from __future__ import annotations
+
+import math
+import threading
+from collections.abc import Callable
+from typing import Any
+
+from diagnostic_msgs.msg import DiagnosticStatus, KeyValue
+from rclpy.node import Node
+from rclpy.qos import DurabilityPolicy, QoSProfile, ReliabilityPolicy
+from std_srvs.srv import Trigger
+
+from feeder_ros.estimation.calibration import CalibrationResult, Calibrator, SpeedMeasurement
+from feeder_ros.estimation.calibration_file import (
+    CalibrationFileError,
+    read_calibration,
+    write_calibration,
+)
+from feeder_ros.estimation.online_calibration import MeasurementSource
+from feeder_ros.estimation.part_belief import PartBelief
+from feeder_ros.estimation.stick_slip_observer import PartModel
+from feeder_ros.estimation.vehicle_estimator import VehicleEstimator
+from feeder_ros.msg import PartCalibration, PartSensorEvent
+from feeder_ros.node_interfaces import ServiceSpec, TopicSpec
+from feeder_ros.physics.parameters import ParameterError, ParameterSpec
+from feeder_ros.srv import SetMeasuredSpeed
+
+__all__ = ["DEFAULTS", "PARAMETERS", "PUBLISHES", "SERVICES", "SUBSCRIBES", "EstimatorCalibration"]
+
+LATCHED_QOS = QoSProfile(
+    depth=1, reliability=ReliabilityPolicy.RELIABLE, durability=DurabilityPolicy.TRANSIENT_LOCAL
+)
+EVENT_QOS = QoSProfile(depth=100, reliability=ReliabilityPolicy.RELIABLE)
+
+PARAMETERS: dict[str, ParameterSpec] = {
+    spec.name: spec
+    for spec in (
+        ParameterSpec(
+            "calibration.enabled",
+            bool,
+            "",
+            "calibrate the part model online from sensor transits and operator speeds",
+            read_only=True,
+        ),
+        ParameterSpec(
+            "calibration.file",
+            str,
+            "",
+            "calibration YAML read at start and rewritten (atomically) on every update; empty: "
+            "none (the calibration is lost on restart)",
+            read_only=True,
+        ),
+        ParameterSpec(
+            "calibration.friction_uncertainty",
+            float,
+            "1",
+            "relative standard uncertainty of the uncalibrated friction (stick limit and slip "
+            "deceleration)",
+            0.0,
+            2.0,
+            read_only=True,
+        ),
+        ParameterSpec(
+            "calibration.gain_uncertainty",
+            float,
+            "1",
+            "relative standard uncertainty of the accelerometer's gain",
+            0.0,
+            0.5,
+            read_only=True,
+        ),
+        ParameterSpec(
+            "calibration.sensor_positions_m",
+            str,
+            "m",
+            "track positions of the part-present sensors by index, as 'a, b, ...' (the "
+            "simulator's sensor_positions_m); empty: no transit calibration",
+            read_only=True,
+        ),
+        ParameterSpec(
+            "calibration.transit_sensors",
+            str,
+            "",
+            "the two sensors whose rising edges are timed, as 'first, second'",
+            read_only=True,
+        ),
+        ParameterSpec(
+            "calibration.transit_uncertainty",
+            float,
+            "1",
+            "relative standard uncertainty of one transit speed besides its timing (part to part, "
+            "sensor jitter)",
+            0.0,
+            1.0,
+            exclusive_minimum=True,
+            read_only=True,
+        ),
+    )
+}
+DEFAULTS: dict[str, Any] = {
+    "calibration.enabled": True,
+    "calibration.file": "",
+    "calibration.friction_uncertainty": 0.3,
+    "calibration.gain_uncertainty": 0.03,
+    "calibration.sensor_positions_m": "",
+    "calibration.transit_sensors": "0, 1",
+    "calibration.transit_uncertainty": 0.01,
+}
+PUBLISHES = (
+    TopicSpec(
+        "calibration",
+        "feeder_ros/msg/PartCalibration",
+        "reliable, transient local, depth 1",
+        "the part model in use (stick limit, slip deceleration, gain), its uncertainty and the "
+        "measurements behind it; on every change",
+    ),
+)
+SUBSCRIBES = (
+    TopicSpec(
+        "parts/sensor_events",
+        "feeder_ros/msg/PartSensorEvent",
+        "reliable, depth 100",
+        "part-present sensor edges: transits between calibration.transit_sensors calibrate the "
+        "part model",
+    ),
+)
+SERVICES = (
+    ServiceSpec(
+        "calibration/measured_speed",
+        "feeder_ros/srv/SetMeasuredSpeed",
+        "an operator's measured part speed at the current drive setting: accepted into the "
+        "calibration, or refused with the reason",
+    ),
+    ServiceSpec(
+        "calibration/reset", "std_srvs/srv/Trigger", "forget the calibration: the nominal part"
+    ),
+)
+
+
+def _numbers(name: str, text: str) -> tuple[float, ...]:
+    try:
+        return tuple(float(x) for x in text.replace(",", " ").split())
+    except ValueError:
+        raise ParameterError(f"{name}={text!r} is not a list of numbers") from None
+
+
+def measurement_source(values: dict[str, Any]) -> MeasurementSource:
+    """The transit pairing the parameters describe (raises ParameterError naming a bad one)."""
+    positions = _numbers("calibration.sensor_positions_m", values["calibration.sensor_positions_m"])
+    pair = _numbers("calibration.transit_sensors", values["calibration.transit_sensors"])
+    if len(pair) != 2 or any(p != int(p) for p in pair):
+        raise ParameterError(
+            f"calibration.transit_sensors={values['calibration.transit_sensors']!r} must be two "
+            "sensor indices"
+        )
+    return MeasurementSource(
+        positions, (int(pair[0]), int(pair[1])), values["calibration.transit_uncertainty"]
+    )
+
+
+class EstimatorCalibration:
+    """See the module docstring. ``lock`` guards ``estimator()`` (the node's lock)."""
+
+    def __init__(
+        self,
+        node: Node,
+        lock: threading.Lock,
+        estimator: Callable[[], VehicleEstimator],
+        nominal: PartModel,
+        values: dict[str, Any],
+    ) -> None:
+        self._node = node
+        self._lock = lock
+        self._estimator = estimator
+        self._values = values
+        self._enabled = bool(values["calibration.enabled"])
+        self._source = measurement_source(values)
+        self._file = values["calibration.file"]
+        self._file_problem = ""
+        self._refused = 0
+        self._message = "nominal part (no measurement yet)"
+        self._calibrator = self._start(nominal)
+        self._publisher = node.create_publisher(PartCalibration, "calibration", LATCHED_QOS)
+        if self._enabled:
+            node.create_subscription(
+                PartSensorEvent, "parts/sensor_events", self._on_sensor_event, EVENT_QOS
+            )
+            node.create_service(
+                SetMeasuredSpeed, "calibration/measured_speed", self._on_measured_speed
+            )
+            node.create_service(Trigger, "calibration/reset", self._on_reset)
+        self._publish()
+
+    def _start(self, nominal: PartModel) -> Calibrator:
+        prior = PartBelief.prior(
+            nominal,
+            self._values["calibration.friction_uncertainty"],
+            self._values["calibration.gain_uncertainty"],
+        )
+        calibrator = Calibrator(prior)
+        if self._enabled and self._file:
+            try:
+                stored = read_calibration(self._file, nominal)
+            except CalibrationFileError as error:
+                self._file_problem = f"{error}: running on the nominal part"
+                self._node.get_logger().error(self._file_problem)
+            else:
+                if stored is not None:
+                    calibrator.restore(stored)
+                    self._message = f"read from {self._file}"
+        return calibrator
+
+    @property
+    def belief(self) -> PartBelief:
+        return self._calibrator.belief
+
+    def renominate(self, nominal: PartModel) -> None:
+        """The nominal part changed (a parameter): the calibration of the old one is void."""
+        self._calibrator = Calibrator(
+            PartBelief.prior(
+                nominal,
+                self._values["calibration.friction_uncertainty"],
+                self._values["calibration.gain_uncertainty"],
+            )
+        )
+        self._message = "nominal part changed: calibration restarted"
+        self._publish()
+
+    # -- inputs ----------------------------------------------------------------------------------
+    def _on_sensor_event(self, message: PartSensorEvent) -> None:
+        part = None if message.part_id == PartSensorEvent.PART_ID_UNKNOWN else message.part_id
+        stamp = float(message.header.stamp.sec) + float(message.header.stamp.nanosec) * 1e-9
+        with self._lock:
+            estimator = self._estimator()
+            outcome = self._source.on_sensor_edge(
+                estimator, stamp, message.sensor_index, message.sensor_position_m, part,
+                message.present,
+            )  # fmt: skip
+            if isinstance(outcome, SpeedMeasurement):
+                self._fold_in(outcome)
+            elif outcome:
+                self._refuse(outcome)
+
+    def _on_measured_speed(
+        self, request: SetMeasuredSpeed.Request, response: SetMeasuredSpeed.Response
+    ) -> SetMeasuredSpeed.Response:
+        with self._lock:
+            outcome = self._source.operator_speed(
+                self._estimator(), request.speed_mps, request.uncertainty_mps
+            )
+            result = self._fold_in(outcome) if isinstance(outcome, SpeedMeasurement) else None
+            if result is None:
+                self._refuse(str(outcome))
+                response.accepted, response.reason = False, str(outcome)
+            else:
+                response.accepted, response.reason = result.accepted, result.reason
+                response.predicted_speed_mps = result.predicted_mps
+                response.predicted_uncertainty_mps = result.predicted_uncertainty_mps
+            belief = self._calibrator.belief
+            response.static_friction = belief.static_friction
+            response.kinetic_friction = belief.kinetic_friction
+        return response
+
+    def _on_reset(self, request: Trigger.Request, response: Trigger.Response) -> Trigger.Response:
+        with self._lock:
+            self._calibrator.restore(
+                PartBelief.prior(
+                    self._calibrator.belief.nominal,
+                    self._values["calibration.friction_uncertainty"],
+                    self._values["calibration.gain_uncertainty"],
+                )
+            )
+            self._refused = 0
+            self._message = "reset to the nominal part"
+            self._estimator().set_belief(self._calibrator.belief)
+            self._persist()
+            self._publish()
+        response.success, response.message = True, self._message
+        return response
+
+    # -- updates -----------------------------------------------------------------------------
+    def _fold_in(self, measurement: SpeedMeasurement) -> CalibrationResult:
+        """Caller holds the lock."""
+        result = self._calibrator.add(measurement)
+        if not result.accepted:
+            self._refuse(result.reason)
+            return result
+        self._message = result.reason
+        self._estimator().set_belief(result.belief)
+        self._persist()
+        self._publish()
+        return result
+
+    def _refuse(self, reason: str) -> None:
+        self._refused += 1
+        self._message = f"refused: {reason}"
+        self._node.get_logger().warning(self._message, throttle_duration_sec=5.0)
+        self._publish()
+
+    def _persist(self) -> None:
+        if not self._file:
+            return
+        try:
+            write_calibration(self._file, self._calibrator.belief)
+        except OSError as error:
+            self._file_problem = f"cannot write {self._file}: {error}"
+            self._node.get_logger().error(self._file_problem, throttle_duration_sec=30.0)
+        else:
+            self._file_problem = ""
+
+    def _publish(self) -> None:
+        self._publisher.publish(self.message())
+
+    # -- outputs -----------------------------------------------------------------------------
+    def message(self) -> PartCalibration:
+        belief = self._calibrator.belief
+        std = belief.std
+        cov = belief.covariance
+        corr = cov[0, 1] / (std[0] * std[1]) if std[0] > 0.0 and std[1] > 0.0 else 0.0
+        msg = PartCalibration()
+        msg.header.stamp = self._node.get_clock().now().to_msg()
+        points = len(belief.points)
+        used = belief.transits + belief.operator_speeds
+        msg.state = (
+            PartCalibration.STATE_NOMINAL
+            if used == 0
+            else PartCalibration.STATE_CALIBRATED
+            if points >= 2
+            else PartCalibration.STATE_CALIBRATING
+        )
+        msg.stick_limit_mps2 = belief.stick_limit_mps2
+        msg.stick_limit_uncertainty = float(std[0])
+        msg.slip_deceleration_mps2 = belief.slip_deceleration_mps2
+        msg.slip_deceleration_uncertainty = float(std[1])
+        msg.stick_slip_correlation = float(corr) if math.isfinite(corr) else 0.0
+        msg.static_friction = belief.static_friction
+        msg.kinetic_friction = belief.kinetic_friction
+        msg.accelerometer_gain = belief.gain
+        msg.accelerometer_gain_uncertainty = float(std[2])
+        msg.transits_used = belief.transits
+        msg.operator_speeds_used = belief.operator_speeds
+        msg.operating_points = points
+        msg.measurements_refused = self._refused
+        msg.message = self._message
+        return msg
+
+    def diagnostic_status(self, name: str) -> DiagnosticStatus:
+        """The calibration's state for ``/diagnostics``: WARN for a calibration file that could not
+        be used or written and for a refused measurement (until the next accepted one)."""
+        belief = self._calibrator.belief
+        std = belief.std
+        level, text = DiagnosticStatus.OK, self._message
+        if not self._enabled:
+            text = "disabled: nominal part"
+        elif self._file_problem:
+            level, text = DiagnosticStatus.WARN, self._file_problem
+        elif self._message.startswith("refused:"):
+            level = DiagnosticStatus.WARN
+        values = {
+            "static_friction": f"{belief.static_friction:.4g}",
+            "kinetic_friction": f"{belief.kinetic_friction:.4g}",
+            "accelerometer_gain": f"{belief.gain:.4g}",
+            "stick_limit_uncertainty": f"{std[0]:.3g}",
+            "slip_deceleration_uncertainty": f"{std[1]:.3g}",
+            "transits_used": str(belief.transits),
+            "operator_speeds_used": str(belief.operator_speeds),
+            "operating_points": str(len(belief.points)),
+            "measurements_refused": str(self._refused),
+            "file": self._file or "(none)",
+        }
+        return DiagnosticStatus(
+            name=name,
+            hardware_id="part model",
+            level=level,
+            message=text,
+            values=[KeyValue(key=k, value=v) for k, v in values.items()],
+        )
