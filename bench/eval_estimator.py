@@ -6,7 +6,8 @@ acceleration sampled at ``--rate`` with white noise of ``--noise-ug`` ug/sqrt(Hz
 bias (seeded), fed in batches as a node would. After ``--settle`` seconds (the carrier transient
 decays with time constant ``2*M_eq/c``) the last ``--window`` seconds are compared:
 
-* mean part speed: the estimator's window mean vs the true part displacement over the same window;
+* mean part speed: the estimator's window mean vs the true part displacement over the same window
+  (the estimator's window holds whole response periods: up to one period less than ``--window``);
 * phase agreement: fraction of steady-state samples whose estimated phase equals the simulator's.
 
 Each point is estimated twice: with the drive command given (``set_drive``) and with the drive
@@ -57,6 +58,8 @@ class Outcome:
     frequency_hz: float
     period_order: int
     cpu_s: float
+    #: the estimate's own window: whole response periods ending at the last sample
+    window_s: float
 
 
 @dataclass(frozen=True)
@@ -107,6 +110,7 @@ def run_estimator(
         frequency_hz=record.drive_frequency_hz,
         period_order=record.period_order,
         cpu_s=cpu,
+        window_s=record.window_s,
     )
 
 
@@ -144,9 +148,6 @@ def evaluate_point(
         raise RuntimeError(f"{t.size} samples, expected {_sample_count(args)}: noise stream skew")
     accel = sim.carrier_a_mps2 + rng.normal(0.0, _noise_sigma(args), t.size) + args.bias
     x = sim.part_x_m[:, 0]
-    k0 = int(np.searchsorted(t, t[-1] - args.window - 1e-9))
-    true_mps = float((x[-1] - x[k0]) / (t[-1] - t[k0]))
-    true_slip = float(np.mean(sim.part_phase[k0:, 0] != 0))
     phase = sim.part_phase[:, 0]
     outcomes = [
         run_estimator(
@@ -154,6 +155,11 @@ def evaluate_point(
         )
         for command in (True, False)
     ]
+    # the truth over the estimate's own window (whole response periods ending at the last sample)
+    span = outcomes[0].window_s if outcomes[0].window_s > 0.0 else args.window
+    k0 = int(np.searchsorted(t, t[-1] - span - 1e-9))
+    true_mps = float((x[-1] - np.interp(t[-1] - span, t, x)) / span)
+    true_slip = float(np.mean(sim.part_phase[k0:, 0] != 0))
     return Row(frequency_hz, amplitude_n, true_mps, true_slip, outcomes[0], outcomes[1])
 
 

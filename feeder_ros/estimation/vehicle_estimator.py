@@ -80,6 +80,8 @@ I8 = npt.NDArray[np.int8]
 B = npt.NDArray[np.bool_]
 
 _HIST_SUMS = ("x_all", "x_valid", "slip_valid", "time_valid")
+#: the uncertainty runs (the part on the fit, once per belief particle) are redone this often
+UNCERTAINTY_INTERVAL_S = 0.5
 #: the band a confidence is the probability of: +-(5 % of the value + 0.05 mm/s)
 CONFIDENCE_RELATIVE = 0.05
 CONFIDENCE_ABSOLUTE = 0.05e-3
@@ -244,7 +246,7 @@ def _empty_trace() -> EstimateTrace:
 def _smoothed(old: float, new: float, fresh: bool) -> float:
     if fresh or not (math.isfinite(old) and math.isfinite(new)):
         return new
-    return old + 0.1 * (new - old)
+    return old + 0.3 * (new - old)
 
 
 def _confidence(value: float, sigma: float) -> float:
@@ -406,6 +408,7 @@ class VehicleEstimator:
         self._fit: HarmonicFit | None = None
         self._q_slip = 1.0
         self._sigma_carrier = self._sigma_part = self._spread = math.nan
+        self._last_uncertainty_t = -math.inf
         self._converged_t = math.nan  # first converged carrier fit of this drive epoch
         self._valid_from = math.nan  # the statistics count from here (converged, part settled)
         self._sensitivity_fresh = True
@@ -773,16 +776,19 @@ class VehicleEstimator:
             return
         self._fit = fit.significant(cfg.coefficient_threshold_sigma)
         self._note_convergence(self._fit)
-        sigma_carrier, sigma_part, spread, q_slip = self._uncertainty(self._fit)
-        # one fit is a noisy snapshot: smoothed over about ten refits, except the first fit of
-        # an epoch or a new belief (no history) and a value that is not finite (no mixing)
+        self._last_fit_t = self._last_t
         fresh = self._sensitivity_fresh
+        if not fresh and self._last_t - self._last_uncertainty_t < UNCERTAINTY_INTERVAL_S:
+            return  # the uncertainty runs (one per belief particle) are not due
+        sigma_carrier, sigma_part, spread, q_slip = self._uncertainty(self._fit)
+        # one fit is a noisy snapshot: smoothed over a few updates (about 1.5 s), except the
+        # first fit of an epoch or a new belief (no history) and a value that is not finite
         self._sigma_carrier = _smoothed(self._sigma_carrier, sigma_carrier, fresh)
         self._sigma_part = _smoothed(self._sigma_part, sigma_part, fresh)
         self._spread = _smoothed(self._spread, spread, fresh)
         self._q_slip = _smoothed(self._q_slip, q_slip, fresh)
         self._sensitivity_fresh = False
-        self._last_fit_t = self._last_t
+        self._last_uncertainty_t = self._last_t
 
     def _note_convergence(self, fit: HarmonicFit) -> None:
         """The first fit of a drive epoch that covers a full fit window with a small model error

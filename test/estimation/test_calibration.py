@@ -168,11 +168,17 @@ def test_impossible_measurements_are_refused_and_change_nothing(
     assert calibrator.belief is before
 
 
-def test_a_measurement_far_from_any_plausible_part_is_an_outlier(points: list[Point]) -> None:
+def _calibrated(point: Point, transits: int) -> Calibrator:
+    """The nominal prior calibrated by exact transits (0.1 mm/s uncertainty) at one point."""
     calibrator = Calibrator(PartBelief.prior(NOMINAL))
-    point = points[0]
-    for _ in range(5):
+    for _ in range(transits):
         calibrator.add(SpeedMeasurement(point.fit, point.true_mps, 1e-4, "transit", point.drive))
+    return calibrator
+
+
+def test_a_measurement_far_from_any_plausible_part_is_an_outlier(points: list[Point]) -> None:
+    point = points[0]
+    calibrator = _calibrated(point, 5)
     settled = calibrator.belief
     # a jammed part, or a wrong sensor spacing: a third of the speed
     result = calibrator.add(
@@ -239,11 +245,8 @@ def test_the_estimator_with_a_calibrated_belief_reports_the_plant(points: list[P
 
 
 def test_a_restored_belief_is_the_prior_of_what_follows(points: list[Point]) -> None:
-    calibrator = Calibrator(PartBelief.prior(NOMINAL))
     point = points[0]
-    for _ in range(3):
-        calibrator.add(SpeedMeasurement(point.fit, point.true_mps, 1e-4, "transit", point.drive))
-    stored = calibrator.belief
+    stored = _calibrated(point, 3).belief
     fresh = Calibrator(PartBelief.prior(NOMINAL))
     fresh.restore(stored)
     assert fresh.belief is stored
