@@ -1,5 +1,8 @@
 """Sensorless stick-slip vehicle estimator: a part's motion from the carrier's acceleration alone.
 
+(About 870 lines, one class: the pipeline's stages below share its sample buffers and drive epoch;
+its records and settings are in :mod:`~feeder_ros.estimation.estimator_records`.)
+
 Pipeline (ROS-free, no clock; :meth:`VehicleEstimator.push` takes batches of accelerometer samples):
 
 1. **Input checks.** Non-finite samples, and samples beyond ``MAX_ABS_SAMPLE`` (1e6 m/s^2 or m: no
@@ -41,11 +44,8 @@ from __future__ import annotations
 
 import collections
 import contextlib
-import enum
 import math
-import numbers
-from dataclasses import dataclass, field, replace
-from typing import Any
+from dataclasses import replace
 
 import numpy as np
 import numpy.typing as npt
@@ -59,13 +59,23 @@ from feeder_ros.estimation.carrier_velocity import (
     refine_frequency,
     select_period_order,
 )
+from feeder_ros.estimation.estimator_records import (
+    Columns,
+    EstimateTrace,
+    EstimatorConfig,
+    Status,
+    VehicleEstimate,
+    WindowStatistics,
+    confidence,
+    empty_trace,
+)
 from feeder_ros.estimation.part_belief import CarrierRun, PartBelief, predict_speed
 from feeder_ros.estimation.stick_slip_observer import (
     PHASE_STICK,
     PartModel,
     StickSlipObserver,
 )
-from feeder_ros.physics.parameters import ParameterError, is_number
+from feeder_ros.physics.parameters import ParameterError
 
 __all__ = [
     "EstimateTrace",
@@ -82,24 +92,9 @@ B = npt.NDArray[np.bool_]
 _HIST_SUMS = ("x_all", "x_valid", "slip_valid", "time_valid")
 #: the uncertainty runs (the part on the fit, once per belief particle) are redone this often
 UNCERTAINTY_INTERVAL_S = 0.5
-#: the band a confidence is the probability of: +-(5 % of the value + 0.05 mm/s)
-CONFIDENCE_RELATIVE = 0.05
-CONFIDENCE_ABSOLUTE = 0.05e-3
 #: a sample's largest magnitude (m/s^2, or m for displacement input): beyond it the sample is
 #: invalid, as a non-finite one is (no accelerometer reads 100,000 g; the fit would overflow)
 MAX_ABS_SAMPLE = 1e6
-
-
-class Status(enum.IntEnum):
-    """``VehicleEstimate.status`` codes (``msg/VehicleEstimate.msg`` STATUS_*)."""
-
-    OK = 0
-    NO_INPUT = 1
-    GAP = 2
-    INVALID_SAMPLES = 3
-    OUT_OF_ORDER = 4
-    DRIVE_CHANGED = 5
-    SETTLING = 6
 
 
 _PRIORITY = (
@@ -111,214 +106,10 @@ _PRIORITY = (
 )
 
 
-@dataclass(frozen=True)
-class EstimatorConfig:
-    """Tuning of :class:`VehicleEstimator` (SI units). Defaults suit a 0.5-2 kHz accelerometer and
-    drives of 5-200 Hz."""
-
-    part: PartModel = field(default_factory=PartModel)
-    window_s: float = 2.0  #: statistics window (mean speed, slip fraction)
-    fit_window_s: float = 1.0  #: harmonic fit window
-    min_fit_s: float = 0.3  #: data needed (after start or a drive change) before a first fit
-    refit_interval_s: float = 0.1  #: refit at most this often
-    order_check_interval_s: float = 2.0  #: re-select the period order this often
-    max_period_order: int = 6  #: longest response period tried, in drive periods
-    max_harmonic_hz: float = 450.0  #: highest harmonic fitted (also capped at 0.45*sample rate)
-    displacement_max_harmonic_hz: float = 200.0  #: the same for displacement input
-    coefficient_threshold_sigma: float = 3.0  #: drop harmonics below this many sigma (0: keep all)
-    batch_interval_s: float = 0.01  #: stage pushes until they span this long (0: every push)
-    gap_factor: float = 2.5  #: an interval > gap_factor * nominal period is a gap
-    max_bridge_s: float = 0.25  #: gaps up to this long are bridged by the carrier model
-    clock_reset_s: float = 1.0  #: stamps this far back reset the estimator
-    frequency_band_hz: tuple[float, float] = (2.0, 300.0)  #: search band without a drive command
-    frequency_tolerance: float = 0.005  #: a first command this close to the estimate is no change
-    observer_settle_s: float = 0.2  #: the part's state is an initial guess for this long
-    model_error_scale: float = 0.1  #: model error / (mu_s*g*kappa) at which confidence is 0.5
-    #: relative standard uncertainty of the uncalibrated friction (L and D) and of the
-    #: accelerometer gain (the prior of :class:`~feeder_ros.estimation.part_belief.PartBelief`)
-    friction_uncertainty: float = 0.3
-    gain_uncertainty: float = 0.03
-    #: the part model's own error at the true parameters, relative (discretisation, model form)
-    method_uncertainty: float = 0.005
-    #: a mean speed is valid once this fraction of ``window_s`` lies after the carrier fit
-    #: converged (and the part state settled) at the current drive setting
-    min_valid_window: float = 0.5
-
-    def __post_init__(self) -> None:
-        positive = (
-            "window_s",
-            "fit_window_s",
-            "min_fit_s",
-            "refit_interval_s",
-            "order_check_interval_s",
-            "max_harmonic_hz",
-            "displacement_max_harmonic_hz",
-            "gap_factor",
-            "clock_reset_s",
-            "frequency_tolerance",
-            "model_error_scale",
-            "min_valid_window",
-        )
-        for name in positive:
-            value = getattr(self, name)
-            if not (is_number(value) and math.isfinite(value) and value > 0.0):
-                raise ParameterError(f"{name}={value!r} must be finite and > 0")
-        for name in (
-            "max_bridge_s",
-            "observer_settle_s",
-            "coefficient_threshold_sigma",
-            "batch_interval_s",
-            "friction_uncertainty",
-            "gain_uncertainty",
-            "method_uncertainty",
-        ):
-            value = getattr(self, name)
-            if not (is_number(value) and math.isfinite(value) and value >= 0.0):
-                raise ParameterError(f"{name}={value!r} must be finite and >= 0")
-        if not (
-            isinstance(self.max_period_order, numbers.Integral)
-            and not isinstance(self.max_period_order, bool)
-            and self.max_period_order >= 1
-        ):
-            raise ParameterError(f"max_period_order={self.max_period_order!r} must be an int >= 1")
-        if self.gap_factor <= 1.0:
-            raise ParameterError(f"gap_factor={self.gap_factor!r} must be > 1")
-        if self.min_valid_window > 1.0:
-            raise ParameterError(f"min_valid_window={self.min_valid_window!r} must be <= 1")
-        if self.min_fit_s > self.fit_window_s:
-            raise ParameterError(
-                f"min_fit_s={self.min_fit_s!r} must not exceed fit_window_s={self.fit_window_s!r}"
-            )
-        lo, hi = self.frequency_band_hz
-        if not (0.0 < lo < hi):
-            raise ParameterError(
-                f"frequency_band_hz={self.frequency_band_hz!r} must be 0 < lo < hi"
-            )
-
-
-@dataclass(frozen=True)
-class VehicleEstimate:
-    """One estimate record: the fields of ``msg/VehicleEstimate.msg`` plus the time it refers to.
-
-    Values without information are ``nan`` with confidence 0.
-    """
-
-    t_s: float
-    carrier_velocity_mps: float
-    part_velocity_mps: float
-    part_velocity_uncertainty_mps: float  #: standard uncertainty (nan: none)
-    part_velocity_confidence: float
-    phase: int
-    phase_confidence: float
-    advance_per_cycle_m: float
-    advance_per_cycle_confidence: float
-    slip_fraction: float
-    slip_fraction_confidence: float
-    mean_speed_mps: float
-    mean_speed_uncertainty_mps: float  #: standard uncertainty (nan: no valid mean speed)
-    mean_speed_confidence: float
-    window_s: float
-    status: Status
-    status_message: str
-    drive_frequency_hz: float  #: commanded or estimated (nan before the first estimate)
-    period_order: int  #: response period in drive periods (0 before the first fit)
-
-
-@dataclass(frozen=True)
-class EstimateTrace:
-    """Per-sample estimates produced by the last push (samples estimated in that call, which may
-    include older samples that waited for a carrier model, and bridged gap samples)."""
-
-    t_s: F64
-    carrier_v_mps: F64
-    carrier_a_mps2: F64
-    part_v_mps: F64
-    phase: I8
-    measured: B  #: False for samples synthesised to bridge a gap
-
-
-def _empty_trace() -> EstimateTrace:
-    return EstimateTrace(
-        np.zeros(0), np.zeros(0), np.zeros(0), np.zeros(0), np.zeros(0, np.int8), np.zeros(0, bool)
-    )
-
-
 def _smoothed(old: float, new: float, fresh: bool) -> float:
     if fresh or not (math.isfinite(old) and math.isfinite(new)):
         return new
     return old + 0.3 * (new - old)
-
-
-def _confidence(value: float, sigma: float) -> float:
-    """The probability that the truth lies within +-(5 % of |value| + 0.05 mm/s, or mm for an
-    advance) of ``value`` for a normal error of standard deviation ``sigma``; 0 without a value
-    or an uncertainty."""
-    if not (math.isfinite(value) and math.isfinite(sigma)):
-        return 0.0
-    tolerance = CONFIDENCE_RELATIVE * abs(value) + CONFIDENCE_ABSOLUTE
-    if sigma <= 0.0:
-        return 1.0
-    return math.erf(tolerance / (sigma * math.sqrt(2.0)))
-
-
-@dataclass(frozen=True)
-class _Window:
-    """The window statistics of one record (nan / 0 where not valid)."""
-
-    mean_speed_mps: float = math.nan
-    mean_speed_uncertainty_mps: float = math.nan
-    slip_fraction: float = math.nan
-    slip_confidence: float = 0.0
-    advance_m: float = math.nan
-    advance_confidence: float = 0.0
-    measured_s: float = 0.0
-
-
-class _Columns:
-    """Time-ordered columns with amortised appends and trimming from the front."""
-
-    def __init__(self, names: tuple[str, ...], dtypes: tuple[type, ...]) -> None:
-        self._names = names
-        self._data: dict[str, npt.NDArray[Any]] = {
-            n: np.zeros(256, d) for n, d in zip(names, dtypes, strict=True)
-        }
-        self._start = 0
-        self._end = 0
-
-    def __len__(self) -> int:
-        return self._end - self._start
-
-    def col(self, name: str) -> npt.NDArray[Any]:
-        return self._data[name][self._start : self._end]
-
-    def append(self, **values: npt.NDArray[Any]) -> None:
-        n = len(next(iter(values.values())))
-        if n == 0:
-            return
-        live = self._end - self._start
-        cap = self._data[self._names[0]].shape[0]
-        if self._end + n > cap:
-            new_cap = max(cap, 2 * (live + n))
-            for name in self._names:
-                arr = self._data[name]
-                new = np.zeros(new_cap, arr.dtype)
-                new[:live] = arr[self._start : self._end]
-                self._data[name] = new
-            self._start, self._end = 0, live
-        for name in self._names:
-            self._data[name][self._end : self._end + n] = values[name]
-        self._end += n
-
-    def drop_before(self, t_min: float, keep_one: bool = False) -> None:
-        """Drop rows with ``t < t_min`` (keeping the last such row if ``keep_one``)."""
-        t = self.col("t")
-        k = int(np.searchsorted(t, t_min, side="left"))
-        if keep_one:
-            k = max(k - 1, 0)
-        self._start += k
-
-    def clear(self) -> None:
-        self._start = self._end = 0
 
 
 class VehicleEstimator:
@@ -396,9 +187,9 @@ class VehicleEstimator:
     def reset(self) -> None:
         """Forget all samples and estimates (the drive command is kept)."""
         self._observer.reset()
-        self._fitbuf = _Columns(("t", "a"), (np.float64, np.float64))
-        self._pending = _Columns(("t", "a", "m"), (np.float64, np.float64, np.bool_))
-        self._hist = _Columns(
+        self._fitbuf = Columns(("t", "a"), (np.float64, np.float64))
+        self._pending = Columns(("t", "a", "m"), (np.float64, np.float64, np.bool_))
+        self._hist = Columns(
             ("t", "x_all", "x_valid", "slip_valid", "time_valid"),
             (np.float64, np.float64, np.float64, np.float64, np.float64),
         )
@@ -432,7 +223,7 @@ class VehicleEstimator:
         self._stage_t: list[F64] = []
         self._stage_a: list[F64] = []
         self._stage_start = math.nan
-        self._trace = _empty_trace()
+        self._trace = empty_trace()
         self._record = self._make_record()
 
     # -- inputs ------------------------------------------------------------------------------
@@ -520,11 +311,11 @@ class VehicleEstimator:
         ):
             self._stage_start = math.nan
             return self.flush()
-        self._trace = _empty_trace()
+        self._trace = empty_trace()
         return self._record
 
     def _process(self, t: F64, a: F64) -> VehicleEstimate:
-        self._trace = _empty_trace()
+        self._trace = empty_trace()
         if t.size == 0:
             return self._record
         finite = np.isfinite(t) & (np.abs(a) <= MAX_ABS_SAMPLE)  # False for nan too
@@ -937,16 +728,16 @@ class VehicleEstimator:
             carrier_velocity_mps=v_c / k,
             part_velocity_mps=u / k,
             part_velocity_uncertainty_mps=sigma_u,
-            part_velocity_confidence=_confidence(u / k, sigma_u),
+            part_velocity_confidence=confidence(u / k, sigma_u),
             phase=self._observer.phase,
-            phase_confidence=self._phase_confidence(fit, t_end, v_c, a_c, u),
+            phase_confidence=self._phaseconfidence(fit, t_end, v_c, a_c, u),
             advance_per_cycle_m=window.advance_m,
             advance_per_cycle_confidence=window.advance_confidence,
             slip_fraction=window.slip_fraction,
             slip_fraction_confidence=window.slip_confidence,
             mean_speed_mps=window.mean_speed_mps,
             mean_speed_uncertainty_mps=window.mean_speed_uncertainty_mps,
-            mean_speed_confidence=_confidence(
+            mean_speed_confidence=confidence(
                 window.mean_speed_mps, window.mean_speed_uncertainty_mps
             ),
             window_s=window.measured_s,
@@ -956,7 +747,7 @@ class VehicleEstimator:
             period_order=self._order,
         )
 
-    def _phase_confidence(
+    def _phaseconfidence(
         self, fit: HarmonicFit, t_end: float, v_c: float, a_c: float, u: float
     ) -> float:
         """The phase's margin (distance to the stick limit, or relative velocity) in units of its
@@ -976,18 +767,18 @@ class VehicleEstimator:
             margin = abs(v_c - u) / max(fit.velocity_uncertainty_mps, 1e-12)
         return q_fit * q_fill * q_obs * 0.5 * (1.0 + math.erf(margin / math.sqrt(2.0)))
 
-    def _window_statistics(self, t_end: float) -> _Window:
+    def _window_statistics(self, t_end: float) -> WindowStatistics:
         """Mean speed, slip fraction and advance per cycle, valid only over a window that lies
         wholly after the current drive setting's carrier model converged (``steady_since_s``) and
         covers ``min_valid_window`` of ``window_s``; otherwise nan (status SETTLING)."""
         cfg = self._cfg
         k = self._belief.gain
         if not (math.isfinite(self._valid_from) and t_end > self._valid_from):
-            return _Window()
+            return WindowStatistics()
         w_start = max(t_end - cfg.window_s, self._stats_start)
         tv = self._cumulative_at("time_valid", t_end) - self._cumulative_at("time_valid", w_start)
         if tv < cfg.min_valid_window * cfg.window_s - 1.5 * (self._dt_nominal or 0.0):
-            return _Window(measured_s=max(tv, 0.0))
+            return WindowStatistics(measured_s=max(tv, 0.0))
         if self._fit is not None:
             # whole response periods: within one, the part's position swings with the carrier, so
             # a mean over a fraction of one more period is off by that swing over the window
@@ -1007,7 +798,7 @@ class VehicleEstimator:
         sigma = math.sqrt(
             self._sigma_carrier**2 + self._sigma_part**2 + (cfg.method_uncertainty * mean) ** 2
         )
-        window = _Window(
+        window = WindowStatistics(
             mean_speed_mps=mean,
             mean_speed_uncertainty_mps=sigma,
             # a difference of running totals over their own span: round-off can leave [0, 1]
@@ -1023,7 +814,7 @@ class VehicleEstimator:
             return window
         advance = (self._cumulative_at("x_all", t_end) - self._cumulative_at("x_all", c_start)) / k
         return replace(
-            window, advance_m=advance, advance_confidence=_confidence(advance, sigma * period)
+            window, advance_m=advance, advance_confidence=confidence(advance, sigma * period)
         )
 
     def _conditions(self) -> dict[Status, str]:
