@@ -40,13 +40,10 @@ __all__ = [
     "PartBelief",
     "SpeedPrediction",
     "gaussian_particles",
-    "mean_speed_on",
     "predict_speed",
 ]
 
 F64 = npt.NDArray[np.float64]
-#: parameter names of theta, in order
-THETA_NAMES = ("ln_stick_limit", "ln_slip_deceleration", "ln_accelerometer_gain")
 #: particles a belief carries for the estimator's own uncertainty runs
 BELIEF_PARTICLES = 64
 #: the gap kept between ln D and ln L: a particle at or past it would have mu_d >= mu_s
@@ -247,14 +244,6 @@ class CarrierRun:
         return np.array(
             [self.mean_speed(belief.measured_part(th)) / math.exp(float(th[2])) for th in thetas]
         )
-
-
-def mean_speed_on(
-    fit: HarmonicFit, part: PartModel, dt_s: float, settle_periods: int, periods: int
-) -> float:
-    """Mean speed of ``part`` on the periodic carrier ``fit`` (in the fit's units): started in
-    stick, run ``settle_periods`` response periods, then averaged over ``periods`` more."""
-    return CarrierRun.of(fit, dt_s, settle_periods, periods).mean_speed(part)
 
 
 @dataclass(frozen=True)

@@ -86,7 +86,6 @@ __all__ = [
 ]
 
 F64 = npt.NDArray[np.float64]
-I8 = npt.NDArray[np.int8]
 B = npt.NDArray[np.bool_]
 
 _HIST_SUMS = ("x_all", "x_valid", "slip_valid", "time_valid")
