@@ -8,7 +8,15 @@ from collections.abc import Sequence
 from dataclasses import dataclass, field
 from enum import IntEnum
 
-__all__ = ["DriveLimits", "LimitError", "Outcome", "SetPoint", "clamp_set_point", "parse_bands"]
+__all__ = [
+    "DriveLimits",
+    "LimitError",
+    "Outcome",
+    "SetPoint",
+    "clamp_set_point",
+    "parse_bands",
+    "set_point_refusal",
+]
 
 
 class LimitError(ValueError):
@@ -125,28 +133,43 @@ class SetPoint:
     ramp_time_s: float = 0.0
 
 
+def set_point_refusal(
+    limits: DriveLimits, frequency_hz: float, amplitude_percent: float, ramp_time_s: float
+) -> str:
+    """Why a requested set point is impossible, naming each impossible value; "" when it is not.
+
+    Impossible: a value that is not finite, a frequency <= 0 Hz, an amplitude < 0 % or a ramp
+    time < 0 s. No drive can do what such a request says, so moving it into the limits would
+    answer a different question: it is refused. Only a possible value outside the configured
+    limits (e.g. 1 Hz or 400 Hz against 5-300 Hz, 120 %) is clamped, by :func:`clamp_set_point`.
+    """
+    frequencies = f"{limits.min_frequency_hz:g}-{limits.max_frequency_hz:g} Hz"
+    amplitudes = f"0-{limits.max_amplitude_percent:g} %"
+    problems: list[str] = []
+    for name, value, relation, unit, in_limits in (
+        ("frequency_hz", frequency_hz, ">", "Hz", f" (this drive: {frequencies})"),
+        ("amplitude_percent", amplitude_percent, ">=", "%", f" (this drive: {amplitudes})"),
+        ("ramp_time_s", ramp_time_s, ">=", "s", ""),
+    ):
+        if not math.isfinite(value):
+            problems.append(f"{name}={value!r} is not finite")
+        elif value < 0.0 or (relation == ">" and value == 0.0):
+            problems.append(f"{name}={value:g} must be {relation} 0 {unit}{in_limits}")
+    return "; ".join(problems)
+
+
 def clamp_set_point(
     limits: DriveLimits, frequency_hz: float, amplitude_percent: float, ramp_time_s: float
 ) -> SetPoint:
     """Move a requested set point into the limits (CLAMPED, with the reason) or refuse it.
 
-    Non-finite values and negative ramp times are refused: they are malformed, not out of range.
-    The ramp time here is the requested one; the ramp generator lengthens it to the rate limits.
+    Impossible values (see :func:`set_point_refusal`) are REFUSED with the reason naming them:
+    they are malformed, not out of range. The ramp time here is the requested one; the ramp
+    generator lengthens it to the rate limits.
     """
-    values = {
-        "frequency_hz": frequency_hz,
-        "amplitude_percent": amplitude_percent,
-        "ramp_time_s": ramp_time_s,
-    }
-    bad = [
-        f"{name}={value!r} is not finite"
-        for name, value in values.items()
-        if not math.isfinite(value)
-    ]
-    if not bad and ramp_time_s < 0.0:
-        bad.append(f"ramp_time_s={ramp_time_s:g} must be >= 0")
-    if bad:
-        return SetPoint(Outcome.REFUSED, "; ".join(bad))
+    refusal = set_point_refusal(limits, frequency_hz, amplitude_percent, ramp_time_s)
+    if refusal:
+        return SetPoint(Outcome.REFUSED, refusal)
     notes: list[str] = []
     frequency = frequency_hz
     if not limits.min_frequency_hz <= frequency <= limits.max_frequency_hz:
@@ -164,8 +187,8 @@ def clamp_set_point(
         )
         frequency = moved
     amplitude = amplitude_percent
-    if not 0.0 <= amplitude <= limits.max_amplitude_percent:
-        amplitude = min(max(amplitude, 0.0), limits.max_amplitude_percent)
+    if amplitude > limits.max_amplitude_percent:
+        amplitude = limits.max_amplitude_percent
         notes.append(
             f"amplitude {amplitude_percent:g} % outside 0-{limits.max_amplitude_percent:g} %, "
             f"clamped to {amplitude:g} %"

@@ -91,7 +91,8 @@ class SpeedTrim:
         if abs(error) <= max(cfg.deadband, uncertainty_mps / abs(target_mps)):
             self.last_note = f"on target ({100 * error:+.2f} %)"
             return None
-        step = max(-cfg.max_step, min(cfg.max_step, cfg.gain * error))
+        # never a step to a negative amplitude (max_step may exceed 1): at most down to zero
+        step = max(-min(cfg.max_step, 1.0), min(cfg.max_step, cfg.gain * error))
         self.steps += 1
         self.last_note = f"trimmed the amplitude by {100 * step:+.2f} % ({100 * error:+.2f} % off)"
         self._settled_s = math.inf  # until the caller reports the new setting

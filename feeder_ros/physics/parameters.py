@@ -84,12 +84,12 @@ class ParameterSpec:
                 raise ParameterError(f"{self.name}={value!r} is not true or false")
             return value
         if self.kind is str:
-            if isinstance(value, str) and not self.choices:
-                return value
-            if not isinstance(value, str) or value not in self.choices:
+            if self.choices and not (isinstance(value, str) and value in self.choices):
                 raise ParameterError(
                     f"{self.name}={value!r} is not one of {', '.join(self.choices)}"
                 )
+            if not isinstance(value, str):
+                raise ParameterError(f"{self.name}={value!r} is not a string")
             return value
         if not is_number(value):
             raise ParameterError(f"{self.name}={value!r} is not a number")
@@ -107,13 +107,32 @@ class ParameterSpec:
         if self.minimum is not None:
             below = number <= self.minimum if self.exclusive_minimum else number < self.minimum
             if below:
-                relation = ">" if self.exclusive_minimum else ">="
-                raise ParameterError(
-                    f"{self.name}={value!r}{self._unit} must be {relation} {self.minimum:g}"
-                )
+                raise ParameterError(f"{self.name}={value!r}{self._unit} must be {self._lower}")
         if self.maximum is not None and number > self.maximum:
-            raise ParameterError(f"{self.name}={value!r}{self._unit} must be <= {self.maximum:g}")
+            raise ParameterError(f"{self.name}={value!r}{self._unit} must be {self._upper}")
         return number
+
+    @property
+    def _lower(self) -> str:
+        """The lower bound as declared, with its unit: ">= 5 Hz", "> 0 kg"."""
+        relation = ">" if self.exclusive_minimum else ">="
+        return f"{relation} {self.minimum:g}{self._unit}"
+
+    @property
+    def _upper(self) -> str:
+        return f"<= {self.maximum:g}{self._unit}"
+
+    @property
+    def bounds(self) -> str:
+        """The admissible range as declared, for messages and descriptions: ">= 5 Hz",
+        "<= 300 Hz", "from 5 to 300 Hz", "> 0 and <= 100 %"; "" for a parameter without bounds."""
+        if self.minimum is None:
+            return "" if self.maximum is None else self._upper
+        if self.maximum is None:
+            return self._lower
+        if self.exclusive_minimum:
+            return f"> {self.minimum:g} and <= {self.maximum:g}{self._unit}"
+        return f"from {self.minimum:g} to {self.maximum:g}{self._unit}"
 
 
 def _positive(name: str, unit: str, description: str, read_only: bool = True) -> ParameterSpec:

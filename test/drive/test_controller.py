@@ -2,6 +2,8 @@
 
 from __future__ import annotations
 
+import math
+
 import pytest
 
 from feeder_ros.drive.controller import DriveController, DriveState
@@ -246,3 +248,54 @@ def test_target_speed_uses_the_model_and_refuses_or_clamps_the_unreachable() -> 
     no_model = DriveController(LIMITS)
     no_model.activate(0.0)
     assert "no speed model" in no_model.set_target_speed(0.0, 0.01, 0.0).reason
+
+
+@pytest.mark.parametrize(
+    ("frequency", "amplitude", "reason"),
+    [
+        (-20.0, 50.0, "frequency_hz=-20 must be > 0 Hz"),
+        (0.0, 50.0, "frequency_hz=0 must be > 0 Hz"),
+        (math.nan, 50.0, "frequency_hz=nan is not finite"),
+        (30.0, -5.0, "amplitude_percent=-5 must be >= 0 %"),
+    ],
+)
+def test_impossible_set_drive_is_refused_and_changes_nothing(
+    frequency: float, amplitude: float, reason: str
+) -> None:
+    c = running_controller()
+    c.heartbeat(3.0)
+    before = c.tick(3.0)
+    answer = c.set_drive(3.0, frequency, amplitude, 0.0)
+    assert answer.outcome is Outcome.REFUSED
+    assert answer.reason.startswith(reason)
+    assert (c.set_point.frequency_hz, c.set_point.amplitude_percent) == (30.0, 50.0)
+    after = c.tick(3.5)
+    assert (after.enabled, after.frequency_hz, after.amplitude_percent) == (True, 30.0, 50.0)
+    assert (before.frequency_hz, before.amplitude_percent) == (30.0, 50.0)
+    assert c.state is DriveState.RUNNING
+
+
+def test_target_speed_refuses_non_finite_speeds_and_treats_negative_ones_as_unreachable() -> None:
+    """A NaN or infinite speed is refused naming it; a negative speed is a direction a feeder
+    may or may not have: the speed model decides (this one has no backward speed: refused with the
+    reachable range; with unreachable_speed=clamp the nearest reachable speed, 0 m/s)."""
+    table = TableSpeedModel(
+        [20.0, 30.0], [0.0, 50.0, 100.0], [[0.0, 0.01, 0.02], [0.0, 0.02, 0.05]]
+    )
+    c = DriveController(LIMITS, speed_model=table)
+    c.activate(0.0)
+    for speed in (math.nan, math.inf, -math.inf):
+        refused = c.set_target_speed(0.0, speed, 0.0)
+        assert refused.outcome is Outcome.REFUSED
+        assert f"speed_mps={speed!r}" in refused.reason
+    backwards = c.set_target_speed(0.0, -0.01, 0.0)
+    assert backwards.outcome is Outcome.REFUSED
+    assert "speed -0.01 m/s unreachable within the limits; reachable 0 .. 0.05 m/s" in (
+        backwards.reason
+    )
+    assert not c.speed_mode
+    c.clamp_unreachable_speed = True
+    clamped = c.set_target_speed(0.0, -0.01, 0.0)
+    assert clamped.outcome is Outcome.CLAMPED
+    assert clamped.predicted_speed_mps == 0.0
+    assert clamped.amplitude_percent == 0.0

@@ -6,7 +6,14 @@ import math
 
 import pytest
 
-from feeder_ros.drive.limits import DriveLimits, LimitError, Outcome, clamp_set_point, parse_bands
+from feeder_ros.drive.limits import (
+    DriveLimits,
+    LimitError,
+    Outcome,
+    clamp_set_point,
+    parse_bands,
+    set_point_refusal,
+)
 
 
 def test_defaults_are_the_issue_s_limits() -> None:
@@ -46,24 +53,54 @@ def test_out_of_range_values_are_clamped_with_reasons() -> None:
     assert (result.frequency_hz, result.amplitude_percent) == (300.0, 100.0)
     assert "frequency 400 Hz outside 5-300 Hz, clamped to 300 Hz" in result.reason
     assert "amplitude 120 % outside 0-100 %, clamped to 100 %" in result.reason
-    low = clamp_set_point(DriveLimits(), 1.0, -5.0, 0.0)
+    low = clamp_set_point(DriveLimits(), 1.0, 0.0, 0.0)
+    assert low.outcome is Outcome.CLAMPED
     assert (low.frequency_hz, low.amplitude_percent) == (5.0, 0.0)
+    assert low.reason == "frequency 1 Hz outside 5-300 Hz, clamped to 5 Hz"
+    tiny = clamp_set_point(DriveLimits(), 1e-9, 10.0, 0.0)  # possible, however slow: clamped
+    assert (tiny.outcome, tiny.frequency_hz) == (Outcome.CLAMPED, 5.0)
 
 
 @pytest.mark.parametrize(
-    ("frequency", "amplitude", "ramp", "fragment"),
+    ("frequency", "amplitude", "ramp", "reason"),
     [
         (math.nan, 10.0, 0.0, "frequency_hz=nan is not finite"),
+        (math.inf, 10.0, 0.0, "frequency_hz=inf is not finite"),
+        (-math.inf, 10.0, 0.0, "frequency_hz=-inf is not finite"),
+        (-20.0, 10.0, 0.0, "frequency_hz=-20 must be > 0 Hz (this drive: 5-300 Hz)"),
+        (0.0, 10.0, 0.0, "frequency_hz=0 must be > 0 Hz (this drive: 5-300 Hz)"),
+        (-0.0, 10.0, 0.0, "frequency_hz=-0 must be > 0 Hz (this drive: 5-300 Hz)"),
         (30.0, math.inf, 0.0, "amplitude_percent=inf is not finite"),
-        (30.0, 10.0, -1.0, "ramp_time_s=-1 must be >= 0"),
+        (30.0, math.nan, 0.0, "amplitude_percent=nan is not finite"),
+        (30.0, -5.0, 0.0, "amplitude_percent=-5 must be >= 0 % (this drive: 0-100 %)"),
+        (30.0, 10.0, -1.0, "ramp_time_s=-1 must be >= 0 s"),
+        (30.0, 10.0, math.inf, "ramp_time_s=inf is not finite"),
+        (
+            -20.0,
+            -5.0,
+            math.nan,
+            "frequency_hz=-20 must be > 0 Hz (this drive: 5-300 Hz); amplitude_percent=-5 "
+            "must be >= 0 % (this drive: 0-100 %); ramp_time_s=nan is not finite",
+        ),
     ],
 )
-def test_malformed_requests_are_refused(
-    frequency: float, amplitude: float, ramp: float, fragment: str
+def test_impossible_requests_are_refused_naming_each_value(
+    frequency: float, amplitude: float, ramp: float, reason: str
 ) -> None:
+    """No drive can run at a frequency <= 0 Hz, a negative amplitude, a negative or infinite ramp
+    or a NaN: refused with every impossible value named, never clamped onto a real set point."""
     result = clamp_set_point(DriveLimits(), frequency, amplitude, ramp)
     assert result.outcome is Outcome.REFUSED
-    assert fragment in result.reason
+    assert result.reason == reason
+    assert set_point_refusal(DriveLimits(), frequency, amplitude, ramp) == reason
+    assert (result.frequency_hz, result.amplitude_percent, result.ramp_time_s) == (0.0, 0.0, 0.0)
+
+
+def test_possible_requests_have_no_refusal() -> None:
+    limits = DriveLimits()
+    for request in ((30.0, 0.0, 0.0), (1e-9, 10.0, 0.0), (1e6, 150.0, 1e3)):
+        assert set_point_refusal(limits, *request) == ""
+        assert clamp_set_point(limits, *request).outcome is not Outcome.REFUSED
 
 
 def test_forbidden_band_moves_the_set_point_to_the_nearest_edge() -> None:

@@ -1,15 +1,21 @@
 """Start-up parameters of the feeder nodes (in-process): the clock is chosen at start-up, so a
 later ``use_sim_time`` change is refused with the reason and the clock stays as it was (a drive
 whose timers switched to sim time with no /clock would have a frozen watchdog); values given for
-parameters a node does not have (misspelled names) are named in a warning, not dropped silently."""
+parameters a node does not have (misspelled names) are named in a warning, not dropped silently;
+a float parameter takes an integer (``-p rate:=30``) at start-up and later, stored as the DOUBLE it
+means; declared ranges are the specs' own, without a made-up far end."""
 
 from __future__ import annotations
 
 import importlib
+import sys
 
 import pytest
 import rclpy
+from rclpy.node import Node
 from rclpy.parameter import Parameter
+
+from feeder_ros.physics.parameters import ParameterSpec
 
 NODES = [
     ("feeder_ros.nodes.drive_interface", "DriveInterface"),
@@ -123,5 +129,135 @@ def test_drive_interface_diagnostics_period_is_read_only() -> None:
             assert node.get_parameter("diagnostics_period_s").value == 0.5
         finally:
             node.destroy_node()
+    finally:
+        rclpy.shutdown(context=context)
+
+
+#: per node: a float parameter given an integer at start-up (read-only ones included: start-up
+#: values are theirs to take), and one set to an integer later
+INTEGER_VALUES = {
+    "DriveInterface": ("max_frequency_hz", 250, "min_frequency_hz", 10),
+    "ManualDrive": ("frequency_hz", 30, "amplitude_n", 20),
+    "PlatformSimulator": ("drive_frequency_hz", 30, "damping_ns_per_m", 2),
+    "SpeedMonitorNode": ("publish_rate_hz", 5, "alarm_delay_s", 3),
+    "VehicleEstimatorNode": ("publish_rate_hz", 10, "max_drive_frequency_hz", 250),
+}
+
+
+def _stored_double(node: Node, name: str, value: int) -> None:
+    stored = node.get_parameter(name)
+    assert stored.type_ == Parameter.Type.DOUBLE, (name, stored.type_)
+    assert type(stored.value) is float
+    assert stored.value == float(value)
+    assert node.get_parameters_by_prefix("")[name].value == float(value)
+    assert type(node._values[name]) is float  # what the node itself computes with
+
+
+@pytest.mark.parametrize(("module", "name"), NODES)
+def test_float_parameters_take_integers_at_start_up_and_later(module: str, name: str) -> None:
+    """``-p drive_frequency_hz:=30`` or ``x: 30`` in a params file gives an INTEGER (as
+    ``Parameter(name, value=30)`` here), and so does ``ros2 param set /node x 30``: a float
+    parameter takes it as the DOUBLE it means, instead of refusing it for its type."""
+    node_class = getattr(importlib.import_module(module), name)
+    start, start_value, later, later_value = INTEGER_VALUES[name]
+    override = Parameter(start, value=start_value)
+    assert override.type_ == Parameter.Type.INTEGER
+    context = rclpy.Context()
+    rclpy.init(context=context)
+    try:
+        node = node_class(context=context, parameter_overrides=[override])
+        try:
+            _stored_double(node, start, start_value)
+            if name == "PlatformSimulator":
+                assert node._drive == (30.0, 0.0)
+            [result] = node.set_parameters([Parameter(later, value=later_value)])
+            assert result.successful, result.reason
+            _stored_double(node, later, later_value)
+            # other types pass unchanged: an integer parameter keeps its type, a bool its own
+            [flag] = node.set_parameters([Parameter("use_sim_time", value=False)])
+            assert flag.successful
+            assert node.get_parameter("use_sim_time").type_ == Parameter.Type.BOOL
+        finally:
+            node.destroy_node()
+    finally:
+        rclpy.shutdown(context=context)
+
+
+@pytest.mark.parametrize(("module", "name"), NODES)
+def test_declared_ranges_have_no_made_up_end(module: str, name: str) -> None:
+    """A parameter with one bound (e.g. > 0 Hz) is described by that bound; a descriptor range
+    up to the largest double (or int64) would show in rclpy's refusals as
+    "Max: 1.7976931348623157e+308"."""
+    node_module = importlib.import_module(module)
+    specs: dict[str, ParameterSpec] = node_module.PARAMETERS
+    context = rclpy.Context()
+    rclpy.init(context=context)
+    try:
+        node = getattr(node_module, name)(context=context)
+        try:
+            for spec in specs.values():
+                descriptor = node.describe_parameter(spec.name)
+                ends = [
+                    (bound.from_value, bound.to_value)
+                    for bound in (*descriptor.floating_point_range, *descriptor.integer_range)
+                ]
+                for low, high in ends:
+                    assert max(abs(low), abs(high)) < min(sys.float_info.max, 2**62), spec.name
+                if spec.minimum is not None and spec.maximum is not None:
+                    assert ends == [(spec.minimum, spec.maximum)], spec.name
+                else:
+                    assert ends == [], spec.name
+                if spec.kind in (int, float) and spec.bounds:
+                    assert descriptor.additional_constraints == f"must be {spec.bounds}"
+        finally:
+            node.destroy_node()
+    finally:
+        rclpy.shutdown(context=context)
+
+
+def test_a_one_sided_range_error_names_the_bound_as_declared() -> None:
+    """What ``ros2 param set`` answers for a value below a parameter's only bound, at run time,
+    and what a start-up value out of range is refused with."""
+    from feeder_ros.nodes.manual_drive import ManualDrive
+    from feeder_ros.physics.parameters import ParameterError
+
+    context = rclpy.Context()
+    rclpy.init(context=context)
+    try:
+        node = ManualDrive(context=context)
+        try:
+            [result] = node.set_parameters([Parameter("frequency_hz", value=-20.0)])
+            assert not result.successful
+            assert result.reason == "frequency_hz=-20.0 Hz must be > 0 Hz"
+            [result] = node.set_parameters([Parameter("amplitude_n", value=-1)])
+            assert result.reason == "amplitude_n=-1.0 N must be >= 0 N"
+            assert node.get_parameter("frequency_hz").value == 29.6
+        finally:
+            node.destroy_node()
+        with pytest.raises(ParameterError, match=r"^frequency_hz=0 Hz must be > 0 Hz$"):
+            ManualDrive(context=context, parameter_overrides=[Parameter("frequency_hz", value=0)])
+    finally:
+        rclpy.shutdown(context=context)
+
+
+def test_a_start_up_value_of_another_type_is_refused_by_name() -> None:
+    """Start-up values are checked against the table before rclpy declares them: a number for a
+    text parameter (``-p modbus.host:=10``) is named as such (only float takes an integer)."""
+    from feeder_ros.nodes.drive_interface import DriveInterface
+    from feeder_ros.physics.parameters import ParameterError
+
+    context = rclpy.Context()
+    rclpy.init(context=context)
+    try:
+        for override, message in (
+            (Parameter("modbus.host", value=10), "modbus.host=10 is not a string"),
+            (Parameter("backend", value=1), "backend=1 is not one of sim, modbus_tcp"),
+            (
+                Parameter("speed_model_enabled", value=1),
+                "speed_model_enabled=1 is not true or false",
+            ),
+        ):
+            with pytest.raises(ParameterError, match=f"^{message}$"):
+                DriveInterface(context=context, parameter_overrides=[override])
     finally:
         rclpy.shutdown(context=context)
