@@ -27,7 +27,7 @@ from feeder_ros.atomic_files import atomic_text
 from feeder_ros.cell import CellDescription, CellError, NodeLaunch, load_cell, parameters_document
 from feeder_ros.cli.arguments import positive_float
 from feeder_ros.cli.main import CommandError
-from feeder_ros.cli.outputs import check_output_file
+from feeder_ros.cli.outputs import check_output_file, output_path
 
 HELP = "start a feeder cell (all its nodes) from a cell description; Ctrl-C stops it"
 CELL_FILE = "cell.yaml"
@@ -84,7 +84,7 @@ def add_arguments(parser: argparse.ArgumentParser) -> None:
     )
     parser.add_argument(
         "--params-out",
-        type=Path,
+        type=output_path,
         metavar="FILE",
         help="--list: write the cell's parameters here, for the printed commands to use",
     )
@@ -170,11 +170,14 @@ def run_composed(cell: CellDescription, parameters_file: Path, duration: float |
 def _spin_composed(
     cell: CellDescription, classes: dict[str, Any], parameters_file: Path, duration: float | None
 ) -> None:
-    from rclpy.executors import MultiThreadedExecutor
+    from rclpy.executors import SingleThreadedExecutor
 
     from feeder_ros.nodes import runner
 
-    executor = MultiThreadedExecutor(num_threads=max(2, len(cell.nodes)))
+    # one thread: rclpy's multi-threaded executor spent the one core the GIL allows on its own
+    # bookkeeping (the demo cell ran at 0.3-0.7x real time); heavy work (a speed table rebuild)
+    # runs in the nodes' worker threads, in solver code that releases the GIL
+    executor = SingleThreadedExecutor()
     nodes = []
     try:
         for launch in cell.nodes:
@@ -217,7 +220,12 @@ def run(args: argparse.Namespace) -> int:
         raise CommandError(f"--duration {args.duration!r} must be > 0")
     if args.params_out is not None and not args.list:
         raise CommandError("--params-out goes with --list")
-    check_output_file(args.params_out, "--params-out")
+    check_output_file(
+        args.params_out,
+        "--params-out",
+        by_name="the printed commands read the parameters from it (without --params-out they are"
+        " printed)",
+    )
     try:
         cell = load_cell(path, node_executables())
     except CellError as error:

@@ -24,7 +24,7 @@ from pathlib import Path
 
 from feeder_ros.cli.arguments import int_at_least, non_negative_int, positive_int
 from feeder_ros.cli.main import CommandError
-from feeder_ros.cli.outputs import check_output_dir, finish_output_dir
+from feeder_ros.cli.outputs import check_output_dir, finish_output_dir, output_path
 from feeder_ros.cli.progress import ProgressBar
 from feeder_ros.cli.sim import add_plant_arguments, default_config_path, plant_from_arguments
 from feeder_ros.design.optimizer import (
@@ -98,7 +98,9 @@ def add_arguments(parser: argparse.ArgumentParser) -> None:
         default=15,
         help="speed-map grid points per axis, >= 2 (--output; default 15)",
     )
-    parser.add_argument("--output", type=Path, metavar="DIR", help="write the report files here")
+    parser.add_argument(
+        "--output", type=output_path, metavar="DIR", help="write the report files here"
+    )
     parser.add_argument(
         "--progress", action="store_true", help="show a progress bar even if stderr is not a TTY"
     )
@@ -128,7 +130,7 @@ def run(args: argparse.Namespace) -> int:
         raise CommandError("--objective min-force needs --target-speed (m/s)")
     if args.objective == "max-speed" and args.target_speed is not None:
         raise CommandError("--target-speed is for --objective min-force")
-    check_output_dir(args.output, "--output")
+    check_output_dir(args.output, "--output", holds="report files (JSON, CSV, PNG, YAML)")
     design, plant, plant_label = _load(args)
     problem = DesignProblem(
         space=design.space,

@@ -30,7 +30,13 @@ from typing import TYPE_CHECKING, Any
 
 from feeder_ros.cli.arguments import non_negative_float, positive_float
 from feeder_ros.cli.main import CommandError
-from feeder_ros.cli.outputs import check_output_dir, check_output_file, finish_output_dir
+from feeder_ros.cli.outputs import (
+    check_apart_from_inputs,
+    check_output_dir,
+    check_output_file,
+    finish_output_dir,
+    output_path,
+)
 from feeder_ros.cli.progress import ProgressBar
 from feeder_ros.cli.sim import add_plant_arguments, default_config_path, plant_from_arguments
 from feeder_ros.identification.group_fit import DEFAULT_FOLDS, FitSettings, GroupFit, fit_group
@@ -154,8 +160,10 @@ def add_arguments(parser: argparse.ArgumentParser) -> None:
         help="do not configure/activate the drive interface (it must be active)",
     )
     out = parser.add_argument_group("output")
-    out.add_argument("--output", type=Path, metavar="DIR", help="sweep.csv, fit.json, fig9/10.png")
-    out.add_argument("--model-out", type=Path, metavar="FILE.yaml", help="speed model file")
+    out.add_argument(
+        "--output", type=output_path, metavar="DIR", help="sweep.csv, fit.json, fig9/10.png"
+    )
+    out.add_argument("--model-out", type=output_path, metavar="FILE.yaml", help="speed model file")
     out.add_argument(
         "--progress", action="store_true", help="show a progress bar even if stderr is not a TTY"
     )
@@ -388,8 +396,14 @@ def _sweep_csv(args: argparse.Namespace) -> SweepResult:
 
 
 def run(args: argparse.Namespace) -> int:
-    check_output_dir(args.output, "--output")
-    check_output_file(args.model_out, "--model-out")
+    if args.source == "bag":
+        check_apart_from_inputs(args.output, "--output", args.inputs)
+    check_output_dir(args.output, "--output", holds="sweep and fit files (CSV, JSON, PNG)")
+    check_output_file(
+        args.model_out,
+        "--model-out",
+        by_name="the drive interface loads the speed model from a file (speed_model_file)",
+    )
     if args.model_out is not None and args.no_fit:
         raise CommandError("--model-out needs the fit (drop --no-fit)")
     if args.source in ("sim", "live") and args.inputs:

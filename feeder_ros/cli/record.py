@@ -14,6 +14,7 @@ from pathlib import Path
 
 from feeder_ros.cli.arguments import positive_float
 from feeder_ros.cli.main import CommandError
+from feeder_ros.cli.outputs import check_output_dir, output_path
 
 __all__ = ["HELP", "add_arguments", "run"]
 
@@ -61,7 +62,10 @@ def add_arguments(parser: argparse.ArgumentParser) -> None:
         "--namespace", default="/", help="the feeder's namespace (default: /, every topic)"
     )
     parser.add_argument(
-        "-o", "--output", type=Path, help="bag directory to create (default: feeder_<date-time>)"
+        "-o",
+        "--output",
+        type=output_path,
+        help="bag directory to create (default: feeder_<date-time>)",
     )
     parser.add_argument(
         "--compression",
@@ -102,12 +106,15 @@ def add_arguments(parser: argparse.ArgumentParser) -> None:
 
 
 def run(args: argparse.Namespace) -> int:
-    from feeder_ros.bag.errors import BagError
-    from feeder_ros.recording import RecordingOptions, record
-
     if args.chunk_size <= 0:
         raise CommandError(f"--chunk-size={args.chunk_size} must be > 0 bytes")
     output = args.output or Path(time.strftime("feeder_%Y%m%d-%H%M%S"))
+    # before rclpy is loaded: refused at once (BagWriter refuses a directory in use)
+    check_output_dir(output, "--output", holds="bag files (metadata.yaml, .mcap)")
+
+    from feeder_ros.bag.errors import BagError
+    from feeder_ros.recording import RecordingOptions, record
+
     options = RecordingOptions(
         output=output,
         topics=tuple(args.topics),

@@ -4,7 +4,10 @@ Parameters come from the simulator's YAML file (``config/platform_simulator.yaml
 ``ros__parameters`` form), then ``--set name=value`` overrides (validated by
 :func:`~feeder_ros.physics.parameters.parse_parameter_value`). Samples are written at exact
 multiples of ``1/--rate``. Output files are written to a temporary file beside the target and
-renamed, so a failed or interrupted run never leaves a half-written file.
+renamed, so a failed or interrupted run never leaves a half-written file. The CSVs (``--output``,
+``--events``) may go to standard output (``-`` or ``/dev/stdout``; the summary is then printed on
+standard error), to standard error (``/dev/stderr``), a FIFO or a device (written in place); the
+figures (``--plot DIR``) need a directory (:mod:`feeder_ros.cli.outputs`).
 """
 
 from __future__ import annotations
@@ -22,10 +25,16 @@ from typing import TYPE_CHECKING, Any, TextIO
 
 import numpy as np
 
-from feeder_ros.atomic_files import atomic_text
 from feeder_ros.cli.arguments import non_negative_int, positive_float
 from feeder_ros.cli.main import CommandError
-from feeder_ros.cli.outputs import check_output_dir, check_output_file, finish_output_dir
+from feeder_ros.cli.outputs import (
+    check_output_dir,
+    check_output_file,
+    finish_output_dir,
+    open_output_text,
+    output_path,
+    report_stream,
+)
 from feeder_ros.cli.progress import ProgressBar
 from feeder_ros.nodes.platform_simulator_parameters import NODE_PARAMETERS
 from feeder_ros.physics.parameters import FeederParameters, ParameterError, parse_parameter_value
@@ -175,9 +184,17 @@ def add_arguments(parser: argparse.ArgumentParser) -> None:
     parser.add_argument(
         "--parts", type=non_negative_int, default=1, help="number of parts on the track (default 1)"
     )
-    parser.add_argument("--output", type=Path, help="write the samples to this CSV file")
-    parser.add_argument("--events", type=Path, help="write the events (t_s,kind,part) to this CSV")
-    parser.add_argument("--plot", type=Path, metavar="DIR", help="write the figures (PNG) here")
+    parser.add_argument(
+        "--output", type=output_path, help="write the samples to this CSV file ('-': stdout)"
+    )
+    parser.add_argument(
+        "--events",
+        type=output_path,
+        help="write the events (t_s,kind,part) to this CSV ('-': stdout)",
+    )
+    parser.add_argument(
+        "--plot", type=output_path, metavar="DIR", help="write the figures (PNG) here"
+    )
     parser.add_argument(
         "--progress", action="store_true", help="show a progress bar even if stderr is not a TTY"
     )
@@ -314,7 +331,8 @@ def _concatenate(chunks: Sequence[SimulationResult]) -> SimulationResult:
 def run(args: argparse.Namespace) -> int:
     check_output_file(args.output, "--output")
     check_output_file(args.events, "--events")
-    check_output_dir(args.plot, "--plot")
+    check_output_dir(args.plot, "--plot", holds="figures (PNG files)")
+    report = report_stream([("--output", args.output), ("--events", args.events)])
     params, _, _ = plant_from_arguments(args)
     parts = default_parts(params, args.parts)
     _check_sample_memory(args.duration, args.rate, len(parts))
@@ -329,10 +347,10 @@ def run(args: argparse.Namespace) -> int:
     wall = time.perf_counter() - started
 
     if args.output is not None:
-        with atomic_text(args.output) as stream:
+        with open_output_text(args.output) as stream:
             write_samples(stream, result)
     if args.events is not None:
-        with atomic_text(args.events) as stream:
+        with open_output_text(args.events) as stream:
             write_events(stream, result)
     figures: list[Path] = []
     if args.plot is not None:
@@ -342,9 +360,9 @@ def run(args: argparse.Namespace) -> int:
             params, parts or default_parts(params, 1), min(DETAIL_WINDOW_S, args.duration)
         )
         figures = plot_result(result, params, Path(args.plot), detail=detail)
-        finish_output_dir(Path(args.plot), figures)
+        finish_output_dir(Path(args.plot), figures, report)
 
-    print(summary(params, result, args.duration, wall, figures, warmup))
+    print(summary(params, result, args.duration, wall, figures, warmup), file=report)
     return 0
 
 
