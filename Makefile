@@ -33,7 +33,8 @@ LINT_PATHS := $(wildcard feeder_ros test bench tools launch) setup.py
 # the demo and the two-host layout. CI runs them on the second distribution (make test-ros
 # ROS_DISTRO=kilted); make test runs everything.
 ROS_TESTS := test/ros test/test_install_paths.py test/test_interfaces.py test/test_dds_smoke.py \
-	test/test_cell.py test/test_demo.py test/test_logging_calls.py test/test_dependencies.py
+	test/test_cell.py test/test_demo.py test/test_demo_runs.py test/test_logging_calls.py \
+	test/test_dependencies.py
 
 help:
 	@echo "make demo   - run the simulated feeder cell end to end (installs what it needs)"

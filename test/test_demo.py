@@ -10,7 +10,15 @@ from typing import Any
 import rclpy
 from ros_test_tools import probe_node
 
-from feeder_ros.demo import STARTUP_LIMIT_S, Recording, problems, summarise, wait_for_nodes
+from feeder_ros.demo import (
+    DEFAULT_MONITOR_TOLERANCE,
+    STARTUP_LIMIT_S,
+    Recording,
+    monitor_tolerance,
+    problems,
+    summarise,
+    wait_for_nodes,
+)
 
 NS = "/demo_cell/feeder_1"
 DRIVE = f"{NS}/drive_interface: drive"
@@ -89,16 +97,28 @@ def test_a_working_cell_passes_and_its_summary_keeps_the_worst_messages(tmp_path
 
 
 def test_a_speed_off_target_in_truth_or_no_calibration_fails(tmp_path: Path) -> None:
-    """On the mismatched feeder the demo shows the landing: the truth within 3 % of the target
-    once the monitor confirmed it, and a part model calibrated from the transits."""
+    """The monitor's OK claims the truth lies within its band: a truth outside it fails the
+    demo (the band as the cell sets it); so does a part model never calibrated from transits."""
     off = _run(tmp_path, truths=(15.2, 8.3))  # 8 mm/s asked, 3.75 % fast in truth
-    assert problems(off, 0, 0, DRIVE) == [
+    assert problems(off, 0, 0, DRIVE) == []  # within the default 5 % band
+    assert problems(off, 0, 0, DRIVE, tolerance=0.03) == [
         "phase ending at 31.6 s (target 8.0 mm/s): the part ran at 8.3 mm/s in truth, +3.8 % off "
-        "the target (within 3 % expected)"
+        "the target, outside the 3 % the speed monitor confirmed"
+    ]
+    far = _run(tmp_path, truths=(15.2, 8.5))  # 6.25 % fast
+    assert problems(far, 0, 0, DRIVE) == [
+        "phase ending at 31.6 s (target 8.0 mm/s): the part ran at 8.5 mm/s in truth, +6.2 % off "
+        "the target, outside the 5 % the speed monitor confirmed"
     ]
     assert problems(_run(tmp_path, transits=0), 0, 0, DRIVE) == [
         "the part model was not calibrated from the sensor transits"
     ]
+
+
+def test_the_band_is_the_cells_speed_monitor_tolerance() -> None:
+    cell = Path(__file__).resolve().parents[1] / "config" / "cell.yaml"
+    assert monitor_tolerance(cell, NS) == 0.05
+    assert monitor_tolerance(cell, "/elsewhere") == DEFAULT_MONITOR_TOLERANCE
 
 
 def test_a_cell_whose_simulator_never_came_up_fails_with_every_reason(tmp_path: Path) -> None:

@@ -58,6 +58,7 @@ class DriveBackend(Protocol):
 
 #: the sim backend's warning while nothing reads its commands
 NO_SIMULATOR = "no subscriber on drive/command: is the platform simulator running?"
+WAITING_FOR_SIMULATOR = "waiting for the simulator's first parts/state"
 
 
 class SimBackend:
@@ -72,10 +73,18 @@ class SimBackend:
     name = "sim"
 
     def __init__(
-        self, publish: Callable[[DriveOutput], None], listeners: Callable[[], int] | None = None
+        self,
+        publish: Callable[[DriveOutput], None],
+        listeners: Callable[[], int] | None = None,
+        feedback_age: Callable[[], float | None] | None = None,
+        feedback_timeout_s: float = 0.0,
     ) -> None:
         self._publish = publish
         self._listeners = listeners
+        # seconds since the simulator last published (None: not yet); a simulator that was live
+        # and has been silent for feedback_timeout_s (> 0) is lost: a fault
+        self._feedback_age = feedback_age
+        self._feedback_timeout_s = feedback_timeout_s
         self._connected = False
         self._last: DriveOutput | None = None
 
@@ -94,13 +103,25 @@ class SimBackend:
                 f"enabled={self._last.enabled} {self._last.frequency_hz:.3f} Hz "
                 f"{self._last.amplitude_percent:.2f} %"
             )
-        warning = ""
+        warning = fault = ""
         if self._listeners is not None:
             count = self._listeners()
             details["drive/command subscribers"] = str(count)
             if self._connected and count == 0:
                 warning = NO_SIMULATOR
-        return BackendStatus(connected=self._connected, warning=warning, details=details)
+        if self._feedback_age is not None and self._feedback_timeout_s > 0.0:
+            age = self._feedback_age()
+            details["simulator silent for s"] = "never heard" if age is None else f"{age:.2f}"
+            if age is None:
+                warning = warning or WAITING_FOR_SIMULATOR
+            elif age > self._feedback_timeout_s and self._connected:
+                fault = (
+                    f"simulator lost: no parts/state for {age:.1f} s (sim_feedback_timeout_s="
+                    f"{self._feedback_timeout_s:g})"
+                )
+        return BackendStatus(
+            connected=self._connected, warning=warning, fault=fault, details=details
+        )
 
     def disconnect(self) -> None:
         if self._connected and self._last is not None:

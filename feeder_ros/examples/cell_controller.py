@@ -49,8 +49,8 @@ STATE_NAMES = {0: "idle", 1: "ramping", 2: "running", 3: "fault", 4: "e-stop"}
 
 
 class CellController(Node):
-    def __init__(self, namespace: str) -> None:
-        super().__init__("cell_controller", namespace=namespace)
+    def __init__(self, namespace: str, **kwargs: Any) -> None:
+        super().__init__("cell_controller", namespace=namespace, **kwargs)
         self.timeline: list[dict[str, Any]] = []
         self.heartbeat_on = True
         self.drive_state: DriveState | None = None

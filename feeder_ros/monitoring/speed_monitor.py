@@ -77,6 +77,9 @@ class MonitorConfig:
     #: no estimate message for this long while driving is a sensor timeout (ERROR); estimates
     #: that keep coming below min_confidence this long are a WARN (no speed to check)
     sensor_timeout_s: float = 2.0
+    #: before the first estimate message (start-up): a WARN "waiting" while driving, a sensor
+    #: timeout only this long after the drive started
+    startup_timeout_s: float = 10.0
     feed_window_s: float = 60.0  #: window of the feed rate
     transit_pair: tuple[int, int] = (0, 1)  #: sensor indices timed for the transit speed
     transit_distance_m: float = 0.085  #: distance between those sensors
@@ -89,6 +92,7 @@ class MonitorConfig:
             "starvation_time_s",
             "track_full_time_s",
             "sensor_timeout_s",
+            "startup_timeout_s",
             "feed_window_s",
             "transit_distance_m",
             "stall_speed_mps",
@@ -257,7 +261,13 @@ class SpeedMonitor:
         no_speed_for = t - max(self._speed_t, self._listen_t)  # listening, no confident speed
         unsure = self._driving and driving_for > cfg.sensor_timeout_s
         unsure = unsure and no_speed_for > cfg.sensor_timeout_s
-        if unsure and not heard:
+        # start-up is not a fault: an estimator never heard from is waited for (while driving,
+        # up to startup_timeout_s); a stream that was live and went silent is lost, driving or
+        # not (the estimator publishes at rest too)
+        never_heard = self._heard_t == -math.inf
+        waiting = never_heard and driving_for <= cfg.startup_timeout_s
+        silent = t - max(self._heard_t, self._listen_t) > cfg.sensor_timeout_s
+        if (unsure and not heard and not waiting) or (not never_heard and silent):
             alarms |= Alarm.SENSOR_TIMEOUT
 
         # stall: driving but the part does not move
@@ -285,6 +295,9 @@ class SpeedMonitor:
         names = [name for bit, name in ALARM_NAMES.items() if alarms & bit]
         if names:
             message = ", ".join(names)
+        elif unsure and waiting:
+            level = WARN
+            message = f"waiting for the first speed estimate ({driving_for:.1f} s since the start)"
         elif unsure:
             level = WARN
             why = (

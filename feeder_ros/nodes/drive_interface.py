@@ -24,6 +24,7 @@ from __future__ import annotations
 
 import math
 import os
+import time
 from pathlib import Path
 from typing import TYPE_CHECKING, Any
 
@@ -52,7 +53,7 @@ from feeder_ros.drive.resonance_tracker import (
 )
 from feeder_ros.drive.speed_model import SpeedModel, cached_speed_table, default_cache_dir
 from feeder_ros.identification.speed_model_file import identified_speed_table, load_speed_model
-from feeder_ros.msg import DriveCommand, SpeedStatus, VehicleEstimate
+from feeder_ros.msg import DriveCommand, PartStateArray, SpeedStatus, VehicleEstimate
 from feeder_ros.msg import DriveState as DriveStateMsg
 from feeder_ros.node_interfaces import NodeInterface, ServiceSpec, TopicSpec
 from feeder_ros.nodes.drive_interface_parameters import (
@@ -79,6 +80,8 @@ if TYPE_CHECKING:
     from feeder_ros.ros_compat import AnyParameter
 
 RELIABLE = QoSProfile(depth=10, reliability=ReliabilityPolicy.RELIABLE)
+#: the simulator's parts/state, read only as a sign of life (sim backend)
+SIM_FEEDBACK_QOS = QoSProfile(depth=1, reliability=ReliabilityPolicy.BEST_EFFORT)
 #: threads a speed table not yet cached is simulated on at configure: one core is left to the
 #: nodes of the cell (the simulator and estimator must keep their sample rate meanwhile)
 SPEED_TABLE_THREADS = max(1, (os.cpu_count() or 1) - 1)
@@ -119,6 +122,13 @@ INTERFACE = NodeInterface(
             "std_msgs/msg/Header",
             "reliable, depth 10",
             "the cell controller's heartbeat; none for heartbeat_timeout_s: ramp to zero, fault",
+        ),
+        TopicSpec(
+            "parts/state",
+            "feeder_ros/msg/PartStateArray",
+            "best effort, depth 1",
+            "sim backend: the simulator's sign of life; silent for sim_feedback_timeout_s after "
+            "it was live: fault (simulator lost)",
         ),
         TopicSpec(
             "estimate",
@@ -207,6 +217,8 @@ class DriveInterface(LifecycleNode):
         self._loop_timers: list[Any] = []
         self._tracker: ResonanceTracker | None = None
         self._feedback_sub: Any = None
+        self._sim_sub: Any = None  # sim backend: the simulator's parts/state (a sign of life)
+        self._sim_heard: float | None = None  # time.monotonic() of its last message
         self._tracking_note = "not configured"  # why tracking is not active
         self._tracking_refused: tuple[float, float, float] | None = None  # start point refused
         self._tracking_mode = TrackerMode.OFF  # as last logged
@@ -296,8 +308,15 @@ class DriveInterface(LifecycleNode):
         )
         if values["backend"] == "sim":
             self._command_pub = self.create_publisher(DriveCommand, "drive/command", RELIABLE)
+            self._sim_heard = None
+            self._sim_sub = self.create_subscription(
+                PartStateArray, "parts/state", self._on_sim_parts, SIM_FEEDBACK_QOS
+            )
             self._backend = SimBackend(
-                self._publish_command, self._command_pub.get_subscription_count
+                self._publish_command,
+                self._command_pub.get_subscription_count,
+                self._sim_feedback_age,
+                values["sim_feedback_timeout_s"],
             )
         else:
             self._backend = ModbusTcpBackend(
@@ -422,6 +441,9 @@ class DriveInterface(LifecycleNode):
         self._tracking_note = "not configured"
         self._tracking_mode = TrackerMode.OFF
         self._speed_feedback.teardown()
+        if self._sim_sub is not None:
+            self.destroy_subscription(self._sim_sub)
+            self._sim_sub = None
         if self._feedback_sub is not None:
             self.destroy_subscription(self._feedback_sub)
             self._feedback_sub = None
@@ -447,6 +469,13 @@ class DriveInterface(LifecycleNode):
         super().destroy_node()  # type: ignore[no-untyped-call,unused-ignore]  # untyped on Jazzy
 
     # -- the loop ------------------------------------------------------------------------------
+    def _on_sim_parts(self, message: PartStateArray) -> None:
+        self._sim_heard = time.monotonic()  # wall time: a simulator gone stops /clock too
+
+    def _sim_feedback_age(self) -> float | None:
+        heard = self._sim_heard
+        return None if heard is None else time.monotonic() - heard
+
     def _publish_command(self, output: DriveOutput) -> None:
         if self._command_pub is None or not self.context.ok():
             return  # shutting down after Ctrl-C: the simulator takes a silent drive as a stop

@@ -80,6 +80,16 @@ NODE_PARAMETERS = (
         "backend", str, "", "drive backend" + _AT_CONFIGURE, choices=("sim", "modbus_tcp")
     ),
     ParameterSpec(
+        "sim_feedback_timeout_s",
+        float,
+        "s",
+        "sim backend: a simulator silent on parts/state this long after it was live is lost "
+        "(latched fault, output off); longer than the simulator's parts/state period; 0: off"
+        + _AT_CONFIGURE,
+        0.0,
+        3600.0,
+    ),
+    ParameterSpec(
         "publish_rate_hz",
         float,
         "Hz",
@@ -426,6 +436,7 @@ DEFAULTS: dict[str, Any] = {
     "full_scale_force_n": 100.0,
     "heartbeat_timeout_s": 2.0,
     "backend": "sim",
+    "sim_feedback_timeout_s": 1.0,
     "publish_rate_hz": 50.0,
     "diagnostics_period_s": 1.0,
     "speed_model_enabled": True,

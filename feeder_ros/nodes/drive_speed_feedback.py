@@ -4,11 +4,12 @@ drive interface node).
 * **Calibrated speed table.** The physics speed table assumes the configured part's friction; the
   estimator calibrates it online and publishes the result (``calibration``,
   ``feeder_ros/PartCalibration``, latched). Each calibration that moves the friction by more than
-  0.5 % rebuilds the table (the exact engine takes well under a second for the default grid; the
-  cache keeps it) and, in target-speed mode, chooses the set point for the target again when the
-  new table picks another frequency (at the same frequency the trimmed amplitude is kept). A reset
-  calibration (state NOMINAL) returns to the configured friction. An identified speed model (a
-  file) is measured, not simulated: it is kept.
+  0.5 % rebuilds the table in a worker thread (the exact engine takes about a second for the
+  demo's grid and releases the GIL; the cache keeps the table) and, once it is built, in
+  target-speed mode, chooses the set point for the target again when the new table picks
+  another frequency (at the same frequency the trimmed amplitude is kept). A reset calibration
+  (state NOMINAL) returns to the configured friction. An identified speed model (a file) is
+  measured, not simulated: it is kept.
 * **Speed trim.** With ``speed_trim.enabled``, target-speed mode closes the loop on the estimate
   (:class:`~feeder_ros.drive.speed_trim.SpeedTrim`): once the estimate is trustworthy (its
   uncertainty below ``speed_trim.max_uncertainty`` of the target), each estimate of the current
@@ -19,6 +20,7 @@ drive interface node).
 from __future__ import annotations
 
 import math
+import threading
 from collections.abc import Callable
 from typing import Any
 
@@ -70,6 +72,12 @@ class SpeedFeedback:
         self._trim = SpeedTrim(trim_settings_from(values))
         self._seen_point: tuple[float, float, bool] | None = None
         self.calibration_note = "not configured"
+        # the table rebuild runs in a worker thread: what it builds, what it built, what next
+        self._build_lock = threading.Lock()
+        self._building: FeederParameters | None = None
+        self._built: tuple[FeederParameters, SpeedModel | str] | None = None
+        self._next: FeederParameters | None = None
+        self._generation = 0  # configure/teardown start a new one: older builds are dropped
 
     def configure(
         self,
@@ -78,6 +86,7 @@ class SpeedFeedback:
         rebuild: Callable[[FeederParameters], SpeedModel] | None,
     ) -> None:
         """``rebuild(plant)``: the physics table for a plant (None: no table to recalibrate)."""
+        self._forget_builds()
         self._controller = controller
         self._plant = self._table_plant = plant
         self._rebuild = rebuild
@@ -106,6 +115,13 @@ class SpeedFeedback:
             self._node.destroy_subscription(subscription)
         self._subscriptions = []
         self._controller = None
+        self._forget_builds()
+
+    def _forget_builds(self) -> None:
+        with self._build_lock:  # a build still running is dropped when it ends
+            self._generation += 1
+            self._building = self._next = None
+            self._built = None
 
     def settings_changed(self) -> None:
         self._trim.settings = trim_settings_from(self._values)
@@ -116,7 +132,9 @@ class SpeedFeedback:
 
     # -- the loop --------------------------------------------------------------------------------
     def tick(self, controller: DriveController, now: float, tracking_active: bool) -> None:
-        """Tell the trim when a new setting is reached (or that trimming stops)."""
+        """Install a rebuilt table; tell the trim when a new setting is reached (or that
+        trimming stops)."""
+        self._take_built_table(controller, now)
         point = controller.set_point
         seen = (point.frequency_hz, point.amplitude_percent, controller.running)
         if not (controller.running and controller.speed_mode) or tracking_active:
@@ -168,25 +186,65 @@ class SpeedFeedback:
             except (ParameterError, ValueError) as error:
                 self._node.get_logger().warning(f"calibration not used: {error}")
                 return
-        current = self._table_plant
-        assert current is not None
-        if all(
-            math.isclose(getattr(wanted, name), getattr(current, name), rel_tol=REBUILD_TOLERANCE)
-            for name in ("static_friction", "kinetic_friction")
-        ):
+        with self._build_lock:
+            current = self._building or self._table_plant
+            assert current is not None
+            if all(
+                math.isclose(
+                    getattr(wanted, name), getattr(current, name), rel_tol=REBUILD_TOLERANCE
+                )
+                for name in ("static_friction", "kinetic_friction")
+            ):
+                return
+            if self._building is not None:
+                self._next = wanted  # built when the running build ends (the latest wins)
+                return
+            self._start_build(wanted, rebuild)
+
+    def _start_build(
+        self, wanted: FeederParameters, rebuild: Callable[[FeederParameters], SpeedModel]
+    ) -> None:
+        """Build the table for ``wanted`` in a worker thread (the build takes about a second;
+        the executor's callbacks, and in a composed cell the other nodes', keep running: the
+        solver releases the GIL). Called with the build lock held."""
+        self._building = wanted
+        generation = self._generation
+
+        def work() -> None:
+            try:
+                result: SpeedModel | str = rebuild(wanted)
+            except (ValueError, RuntimeError, OSError) as error:
+                result = str(error)
+            with self._build_lock:
+                if generation == self._generation:
+                    self._built = (wanted, result)
+
+        threading.Thread(target=work, name="speed-table-rebuild", daemon=True).start()
+
+    def _take_built_table(self, controller: DriveController, now: float) -> None:
+        """Install a table the worker finished (executor thread: the controller is not shared)."""
+        with self._build_lock:
+            if self._built is None:
+                return
+            wanted, result = self._built
+            self._built, self._building = None, None
+            following, self._next = self._next, None
+            if following is not None and self._rebuild is not None:
+                self._start_build(following, self._rebuild)
+        if isinstance(result, str):
+            self._node.get_logger().error(f"speed table for the calibrated part failed: {result}")
             return
-        try:
-            model = rebuild(wanted)
-        except (ValueError, RuntimeError, OSError) as error:
-            self._node.get_logger().error(f"speed table for the calibrated part failed: {error}")
-            return
+        self._install(controller, now, wanted, result)
+
+    def _install(
+        self, controller: DriveController, now: float, wanted: FeederParameters, model: SpeedModel
+    ) -> None:
         self._table_plant = wanted
         controller.speed_model = model
         self.calibration_note = (
             f"table for mu_s {wanted.static_friction:.4g}, mu_d {wanted.kinetic_friction:.4g}"
         )
         self._node.get_logger().info(f"speed model recalibrated: {self.calibration_note}")
-        now = float(self._node.get_clock().now().nanoseconds) * 1e-9
         if controller.speed_mode and math.isfinite(controller.target_speed_mps):
             trimmed = controller.set_point
             choice = model.choose(controller.target_speed_mps)

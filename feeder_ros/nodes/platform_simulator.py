@@ -230,6 +230,7 @@ class PlatformSimulator(Node):
         self.create_service(SpawnParts, "~/spawn_parts", self._on_spawn)
 
         self._failure: str | None = None  # the last solver failure, until the drive runs again
+        self._late_commands = 0  # commands applied at once because the simulation lagged
         self._start()
         self._timer = self.create_timer(self._values["tick_period_s"], self._tick, clock=self._wall)
         self._diagnostics_pub = pub(DiagnosticArray, "/diagnostics", 10)
@@ -365,7 +366,13 @@ class PlatformSimulator(Node):
                 )
                 self._stop_drive(now)
                 return
-            if at - now > FUTURE_STAMP_TOLERANCE_S:
+            lag = self._lag_s()
+            if now < at <= now + lag + FUTURE_STAMP_TOLERANCE_S:
+                # ahead of the simulation only because the simulation lags the wall clock (the
+                # commander's): the command is for the present, applied at the simulation's own
+                at = now
+                self._late_commands += 1
+            elif at - now > FUTURE_STAMP_TOLERANCE_S:
                 # a stamp from a clock that does not match the simulation's (wall clock against
                 # /clock, or a wrong epoch): scheduled there it would also hold off the timeout
                 self.get_logger().warning(
@@ -459,6 +466,12 @@ class PlatformSimulator(Node):
         elapsed = self._wall.now().nanoseconds * 1e-9 - self._pace_wall_s
         return self._pace_sim_s + elapsed * float(self._values["real_time_factor"])
 
+    def _lag_s(self) -> float:
+        """How far the simulation trails its paced schedule (0 when unpaced or ahead)."""
+        if self._values["real_time_factor"] == 0.0:
+            return 0.0
+        return max(self._schedule_time() - self._sim.time_s, 0.0)
+
     def _target_time(self) -> float:
         step = float(self._values["max_step_s"])
         if self._values["real_time_factor"] == 0.0:
@@ -515,12 +528,15 @@ class PlatformSimulator(Node):
             if factor > 0.0:
                 lag = self._pace_sim_s + (wall_now - self._pace_wall_s) * factor - sim_now
             on_track = self._sim.part_count - self._parts_out
+            achieved = (sim_now - sim_then) / max(wall_now - wall_then, 1e-9)
+            late = self._late_commands
             plant = self._sim.params
             values = {
                 "simulated_time_s": f"{sim_now:.6f}",
-                "achieved_real_time_factor": f"{(sim_now - sim_then) / (wall_now - wall_then):.3f}",
+                "achieved_real_time_factor": f"{achieved:.3f}",
                 "requested_real_time_factor": f"{factor:g}",
                 "lag_behind_schedule_s": f"{lag:.4f}",
+                "drive_commands_applied_late": str(late),
                 "imu_samples_published": str(self._imu_index - 1),
                 "state_samples_published": str(self._state_index - 1),
                 "parts_on_track": str(on_track),
@@ -531,11 +547,18 @@ class PlatformSimulator(Node):
                 "backward_natural_frequency_hz": f"{plant.backward_natural_frequency_hz:.4g}",
             }
             failure = self._failure
-        level, text = DiagnosticStatus.OK, "running"
+        level, text = DiagnosticStatus.OK, f"running at {achieved:.2f}x real time"
         if failure is not None:
             level, text = DiagnosticStatus.ERROR, failure
         elif lag >= 0.1:
-            level, text = DiagnosticStatus.WARN, f"{lag:.2f} s behind the wall clock"
+            behind = (
+                f"{lag:.2f} s behind the wall clock, running at {achieved:.2f}x real time "
+                f"({factor:g}x requested); {late} drive commands applied late"
+            )
+            if lag >= float(self._values["max_lag_s"]):
+                level, text = DiagnosticStatus.ERROR, "cannot keep up: " + behind
+            else:
+                level, text = DiagnosticStatus.WARN, behind
         status = DiagnosticStatus(
             name=f"{self.get_fully_qualified_name()}: simulation",
             hardware_id="simulated feeder",

@@ -49,6 +49,15 @@ NODE_PARAMETERS: dict[str, ParameterSpec] = {
             maximum=1000.0,
         ),
         ParameterSpec(
+            "max_lag_s",
+            float,
+            "s",
+            "trailing the paced schedule by this much means the simulator cannot keep up: "
+            "diagnostics ERROR (WARN from 0.1 s); its sensor data then run late",
+            0.1,
+            3600.0,
+        ),
+        ParameterSpec(
             "max_step_s",
             float,
             "s",
@@ -126,6 +135,7 @@ NODE_DEFAULTS: dict[str, Any] = {
     "publish_batches": False,
     "tick_period_s": 0.01,
     "real_time_factor": 1.0,
+    "max_lag_s": 1.0,
     "max_step_s": 0.05,
     "command_timeout_s": 1.0,
     "initial_parts": 1,

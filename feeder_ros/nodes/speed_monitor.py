@@ -45,8 +45,13 @@ _TIMES = (
     ("track_full_time_s", "a part-present sensor covered this long means the track is full"),
     (
         "sensor_timeout_s",
-        "no estimate this long while driving is a sensor timeout (ERROR); estimates that keep "
-        "coming below min_confidence this long are a WARN",
+        "no estimate this long once they came (driving or not) is a sensor timeout (ERROR); "
+        "estimates that keep coming below min_confidence this long while driving are a WARN",
+    ),
+    (
+        "startup_timeout_s",
+        "no first estimate this long after the drive starts is a sensor timeout (ERROR; WARN "
+        "'waiting for the first speed estimate' until then)",
     ),
     ("feed_window_s", "window of the feed rate"),
 )
@@ -132,6 +137,7 @@ DEFAULTS: dict[str, Any] = {
     "starvation_time_s": 30.0,
     "track_full_time_s": 10.0,
     "sensor_timeout_s": 2.0,
+    "startup_timeout_s": 10.0,
     "feed_window_s": 60.0,
     "transit_first_sensor": 0,
     "transit_second_sensor": 1,
@@ -198,6 +204,7 @@ def _config(values: dict[str, Any]) -> MonitorConfig:
         starvation_time_s=values["starvation_time_s"],
         track_full_time_s=values["track_full_time_s"],
         sensor_timeout_s=values["sensor_timeout_s"],
+        startup_timeout_s=values["startup_timeout_s"],
         feed_window_s=values["feed_window_s"],
         transit_pair=(values["transit_first_sensor"], values["transit_second_sensor"]),
         transit_distance_m=values["transit_distance_m"],

@@ -1517,7 +1517,9 @@ def advance(
     return STATUS_DONE
 
 
-@njit(cache=True, parallel=True)
+# nogil: a table rebuild in a node's worker thread leaves the executor (and, composed, the
+# other nodes) running
+@njit(cache=True, parallel=True, nogil=True)
 def advance_many(
     models,
     d_start,

@@ -106,6 +106,32 @@ def test_sensor_timeout_when_estimates_stop() -> None:
     assert monitor.evaluate(7.7).alarms == Alarm.SENSOR_TIMEOUT
 
 
+def test_start_up_is_waited_for_and_a_live_estimator_gone_silent_is_a_timeout() -> None:
+    """Before the first estimate message the monitor says it waits (WARN), for up to
+    startup_timeout_s after the drive started; only then, or when a live stream stops, ERROR."""
+    monitor = SpeedMonitor(MonitorConfig(sensor_timeout_s=2.0, startup_timeout_s=10.0))
+    monitor.on_drive(0.0, True, TARGET)
+    status = monitor.evaluate(4.3)
+    assert (status.level, status.alarms) == (1, 0)
+    assert status.message == "waiting for the first speed estimate (4.3 s since the start)"
+    assert monitor.evaluate(10.0).alarms == 0
+    status = monitor.evaluate(10.2)
+    assert (status.level, status.alarms) == (2, Alarm.SENSOR_TIMEOUT)
+    # a stream that was live and went silent: the sensor timeout after sensor_timeout_s
+    live = SpeedMonitor(MonitorConfig(sensor_timeout_s=2.0, startup_timeout_s=10.0))
+    live.on_drive(0.0, True, TARGET)
+    _run(live, 0.0, 1.0, TARGET)
+    assert live.evaluate(3.0).alarms == 0
+    assert live.evaluate(3.2).alarms == Alarm.SENSOR_TIMEOUT
+    # also when the drive stopped meanwhile (e.g. it faulted: the simulator died)
+    live.on_drive(3.3, False, math.nan)
+    status = live.evaluate(3.4)
+    assert (status.level, status.alarms) == (2, Alarm.SENSOR_TIMEOUT)
+    # an idle monitor that never heard an estimate waits without an alarm
+    idle = SpeedMonitor(MonitorConfig(sensor_timeout_s=2.0, startup_timeout_s=10.0))
+    assert idle.evaluate(30.0).alarms == 0
+
+
 def test_the_monitors_own_stall_is_not_the_inputs_silence() -> None:
     """Not listening from 3.0 to 5.6 s (the process stalled), then the middleware's catch-up
     until 6.6 s (the node calls resumed at each tick in it): silence counts from 6.6 s, for the

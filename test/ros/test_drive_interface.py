@@ -215,7 +215,12 @@ def _max_rate(commands: Sequence[DriveCommand], field: str) -> float:
     return max(rates)
 
 
-FAST = ("speed_model_enabled:=false", "max_amplitude_rate_percent_per_s:=20.0")
+# the probe stands in for the simulator and publishes no parts/state: its liveness check is off
+FAST = (
+    "speed_model_enabled:=false",
+    "max_amplitude_rate_percent_per_s:=20.0",
+    "sim_feedback_timeout_s:=0.0",
+)
 CONFIG = Path(__file__).resolve().parents[2] / "config" / "drive_interface.yaml"
 
 
@@ -293,6 +298,40 @@ def test_unconfigured_node_refuses_and_parameters_are_validated() -> None:
         assert not refused.successful
         assert "pairs" in refused.reason
         assert cell.set_parameter("max_frequency_hz", double(200.0)).results[0].successful
+
+
+def test_impossible_set_points_are_refused_and_change_nothing() -> None:
+    """A frequency <= 0 Hz or NaN, a negative amplitude: no drive can do that, so set_drive
+    refuses it naming the value (not CLAMPED onto the lowest frequency and driven): the running
+    drive keeps its set point and output."""
+    ns = "/drive_impossible"
+    with drive_node(ns, *FAST) as cell:
+        cell.bring_up()
+        cell.start_heartbeat()
+        assert cell.set_drive(30.0, 10.0, 0.0).result == SetDrive.Response.ACCEPTED
+        started = cell.trigger("start")
+        assert started.success, started.message
+        cell.wait_state(DriveState.STATE_RUNNING)
+        t_before = cell.now_s()
+        for frequency, amplitude, reason in (
+            (-20.0, 10.0, "frequency_hz=-20 must be > 0 Hz (this drive: 5-300 Hz)"),
+            (0.0, 10.0, "frequency_hz=0 must be > 0 Hz (this drive: 5-300 Hz)"),
+            (math.nan, 10.0, "frequency_hz=nan is not finite"),
+            (30.0, -10.0, "amplitude_percent=-10 must be >= 0 % (this drive: 0-100 %)"),
+        ):
+            answer = cell.set_drive(frequency, amplitude, 0.0)
+            assert answer.result == SetDrive.Response.REFUSED, answer
+            assert answer.reason == reason
+        t_after = cell.now_s()
+        assert wait_until(lambda: len(cell.states_since(t_after)) >= 3, 5.0)
+        assert wait_until(lambda: len(cell.commands_since(t_after)) >= 3, 5.0)
+        for state in cell.states_since(t_before):
+            assert state.state == DriveState.STATE_RUNNING
+            assert (state.target_frequency_hz, state.target_amplitude_percent) == (30.0, 10.0)
+            assert (state.frequency_hz, state.amplitude_percent) == (30.0, 10.0)
+        for command in cell.commands_since(t_before):
+            assert command.enabled
+            assert (command.frequency_hz, command.amplitude_percent) == (30.0, 10.0)
 
 
 def test_ramps_stop_estop_and_deactivate_on_the_wire() -> None:

@@ -49,7 +49,7 @@ def test_config_file_lists_every_parameter_at_its_default(node: str) -> None:
     assert sorted(values) == sorted(module.PARAMETERS)
     for name, value in values.items():
         spec = module.PARAMETERS[name]
-        # the file's YAML type is the parameter's (ROS refuses 1 for a double parameter)
+        # the file's YAML type is the parameter's (1.0 for a double: the file documents the type)
         assert _same(spec.check(value), module.DEFAULTS[name]), name
         assert type(value) is spec.kind, (name, value)
 
