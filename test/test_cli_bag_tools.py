@@ -74,11 +74,19 @@ def test_info_names_lost_data_and_refuses_a_non_bag(
     assert main(["info", str(bag), "--json"]) == 1
     data = json.loads(capsys.readouterr().out)
     assert data["data_lost"] is True
-    assert [p["kind"] for p in data["problems"] if p["data_lost"]] == ["missing_file"]
+    kinds = [p["kind"] for p in data["problems"] if p["data_lost"]]
+    assert kinds == ["missing_file", "lost_messages"]
     assert data["message_count"] == 330 - 110
+    # counted: metadata.yaml lists the missing file's 110 messages (100 + 10)
+    assert data["lost_messages"] == 110
+    assert (data["loss"]["recorded"], data["loss"]["total_known"]) == (330, True)
+    lost = {t["name"]: (t["recorded"], t["lost"]) for t in data["loss"]["topics"]}
+    assert lost == {"/imu_like": (300, 100), "/slow": (30, 10)}
     assert main(["info", str(bag)]) == 1
     text = capsys.readouterr().out
-    assert "DATA LOST: 1 problem(s)" in text
+    assert "Messages:  220 readable of 330 recorded: 110 LOST" in text
+    assert "DATA LOST: 110 of 330 recorded messages lost (33.3 %" in text
+    assert "2 problem(s) lost recorded messages" in text
     assert f"[missing_file] {files[1]}" in text
     missing = tmp_path / "nothing"
     assert main(["info", str(missing)]) == 2
@@ -101,12 +109,14 @@ def test_reindex_repairs_a_cut_short_bag(
     chunks = sorted(summary.chunk_indexes, key=lambda c: c.chunk_start_offset)
     assert len(chunks) > 4
     kept = chunks[:4]
-    # the killed recorder: the file ends inside the fifth chunk, metadata.yaml is gone
-    mcap.write_bytes(mcap.read_bytes()[: chunks[4].chunk_start_offset + 30])
+    # the killed recorder (it writes whole chunks): the file ends after the fourth chunk, and
+    # metadata.yaml is gone
+    mcap.write_bytes(mcap.read_bytes()[: chunks[4].chunk_start_offset])
     (bag / "metadata.yaml").unlink()
     assert main(["info", str(bag)]) == 0  # cut short, nothing lost: the complete chunks read
     text = capsys.readouterr().out
     assert "cut short" in text
+    assert "how many were recorded is unknown" in text
     readable = int(
         next(line for line in text.splitlines() if line.startswith("Messages:")).split()[1]
     )

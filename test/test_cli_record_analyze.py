@@ -22,7 +22,12 @@ from typing import Any
 import numpy as np
 import pytest
 import yaml
-from bag.test_analysis import corrupt_middle_chunk, write_feeder_bag
+from bag.test_analysis import (
+    corrupt_middle_chunk,
+    listed_counts,
+    messages_per_chunk,
+    write_feeder_bag,
+)
 from mcap.reader import make_reader
 from mcap_ros2.decoder import DecoderFactory
 from rclpy.node import Node
@@ -297,8 +302,9 @@ def test_analyze_cli_outputs_and_bad_input(tmp_path: Path) -> None:
     assert "100%" in mixed.stderr  # the progress bar
     assert "not an MCAP bag" in mixed.stderr
     rows = (tmp_path / "out" / "comparison.csv").read_text().splitlines()
-    assert rows[1].split(",")[:2] == [str(tmp_path / "good"), "ok"]
-    assert rows[2].split(",")[1] == "error"
+    assert rows[0].split(",")[:3] == ["bag", "namespace", "status"]
+    assert rows[1].split(",")[:3] == [str(tmp_path / "good"), "/cell_a", "ok"]
+    assert rows[2].split(",")[2] == "error"
     assert (tmp_path / "out" / "good_segments.csv").is_file()
 
     # the same bag under another name into the same directory: the tables named after the
@@ -329,15 +335,22 @@ def test_analyze_cli_reports_data_lost_to_a_corrupt_chunk(tmp_path: Path) -> Non
     """A corrupt chunk in the middle: the rest is analysed and written, but the loss is said (the
     counts and feed rates are short) and the exit status is 1."""
     write_feeder_bag(tmp_path / "bag", chunk_size=8192, extras=False)
+    total, _ = listed_counts(tmp_path / "bag")
+    per_chunk = messages_per_chunk(tmp_path / "bag" / "bag_0.mcap")
     middle = corrupt_middle_chunk(tmp_path / "bag" / "bag_0.mcap")
+    lost = per_chunk[len(per_chunk) // 2]  # the messages of the corrupted (middle) chunk
     out = tmp_path / "out"
     result = analyze_into(tmp_path / "bag", out)
     assert result.returncode == 1, result.stderr
     lost_s = (middle.message_end_time - middle.message_start_time) * 1e-9
-    assert f"DATA LOST: 1 corrupt chunk(s) skipped, about {lost_s:.3g} s" in result.stdout
+    assert (
+        f"DATA LOST: {lost} of {total} recorded messages lost, 1 corrupt chunk(s) skipped, "
+        f"about {lost_s:.3g} s"
+    ) in result.stdout
     assert "1 corrupt chunk(s) skipped" in result.stderr
     document = json.loads((out / "analysis.json").read_text())
     (bag,) = document["bags"]
+    assert bag["lost_messages"] == lost
     assert bag["chunks_lost"] == 1
     assert bag["lost_s"] == pytest.approx(lost_s)
     assert "data lost" in (out / "comparison.csv").read_text()
@@ -463,15 +476,19 @@ def test_analyze_cli_reports_a_missing_split_file_as_data_lost(tmp_path: Path) -
     """Not only corrupt chunks: a split file listed in metadata.yaml but gone is lost data too
     (exit status 1, the loss named on stdout, stderr and in the JSON)."""
     write_feeder_bag(tmp_path / "bag", chunk_size=8192, extras=False, split_s=1)
+    total, per_file = listed_counts(tmp_path / "bag")
     (tmp_path / "bag" / "bag_2.mcap").unlink()
     out = tmp_path / "out"
     result = analyze_into(tmp_path / "bag", out)
     assert result.returncode == 1, result.stderr
-    assert "DATA LOST: 1 missing file(s), about 0.999 s of recording" in result.stdout
-    assert f"{tmp_path / 'bag'}: data lost (1 missing file(s)" in result.stderr
+    lost = f"{per_file['bag_2.mcap']} of {total} recorded messages lost"
+    assert f"DATA LOST: {lost}, 1 missing file(s), about 0.999 s of recording" in result.stdout
+    assert f"{tmp_path / 'bag'}: data lost ({lost}, 1 missing file(s)" in result.stderr
     (bag,) = json.loads((out / "analysis.json").read_text())["bags"]
-    (loss,) = bag["data_losses"]
-    assert loss.startswith(f"[missing_file] {tmp_path / 'bag' / 'bag_2.mcap'}")
+    missing, count = bag["data_losses"]
+    assert missing.startswith(f"[missing_file] {tmp_path / 'bag' / 'bag_2.mcap'}")
+    assert count.startswith(f"[lost_messages] {lost}")
+    assert bag["lost_messages"] == per_file["bag_2.mcap"]
     assert bag["chunks_lost"] == 0
     assert bag["lost_s"] == pytest.approx(0.999)
     assert "data lost" in (out / "comparison.csv").read_text()

@@ -4,8 +4,10 @@ Write: ``BagWriter`` (bag directory with metadata.yaml version 9 and chunked, co
 files; crash safe chunk by chunk). Read: ``Bag`` / ``bag_info`` / ``read_columns`` (vectorised CDR
 decoding into numpy column batches, streamed chunk by chunk) / ``iter_messages`` (generic).
 Repair: ``reindex`` (metadata.yaml from the data; cut-short files finished with summary and footer;
-files damaged otherwise left as they are). ``Bag.lost_data()`` lists the problems that lost recorded
-messages (``DATA_LOSS_KINDS``).
+files damaged otherwise left as they are; the loss found kept). ``Bag.lost_data()`` lists the
+problems that lost recorded messages (``DATA_LOSS_KINDS``); ``Bag.loss`` / ``BagInfo.loss``
+(``LossCount``) count them: recorded (metadata.yaml, MCAP summaries) against readable, per topic.
+Analysis (per feeder, feeders told apart by namespace): :mod:`feeder_ros.bag.analysis`.
 """
 
 from feeder_ros.bag.cdr import ColumnPlan, decode_cdr
@@ -21,11 +23,13 @@ from feeder_ros.bag.errors import (
     UnsupportedLayoutError,
     WriterStateError,
 )
+from feeder_ros.bag.loss import LossCount, TopicLoss
 from feeder_ros.bag.reader import (
     LOG_TIME,
     PUBLISH_TIME,
     Bag,
     BagInfo,
+    Checks,
     ColumnBatch,
     RawMessage,
     TopicInfo,
@@ -49,13 +53,16 @@ __all__ = [
     "BagProblem",
     "BagWarning",
     "BagWriter",
+    "Checks",
     "ColumnBatch",
     "ColumnPlan",
     "CorruptRecordError",
+    "LossCount",
     "MessageDefinitionError",
     "MissingBagError",
     "RawMessage",
     "TopicInfo",
+    "TopicLoss",
     "UnknownTypeError",
     "UnsupportedLayoutError",
     "WriterStateError",

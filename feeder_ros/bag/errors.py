@@ -105,6 +105,8 @@ DATA_LOSS_KINDS = frozenset(
         "malformed_message",  # messages that end before their last field, dropped
         "unsupported_encoding",  # messages without a plain CDR header, skipped
         "unknown_channel",  # messages of a channel never defined (its record lost)
+        "cut_chunk",  # the file ends inside a chunk (or message): its messages lost
+        "lost_messages",  # fewer messages readable than metadata.yaml or the summaries count
     }
 )
 
@@ -113,7 +115,7 @@ DATA_LOSS_KINDS = frozenset(
 class BagProblem:
     """One finding of the reader: what, where (file, byte offset, topic) and what was done."""
 
-    kind: str  # "cut_short", "corrupt_chunk", "missing_metadata", "unknown_schema", ...
+    kind: str  # "cut_short", "corrupt_chunk", "lost_messages", "missing_metadata", ...
     file: Path | None
     detail: str
     offset: int | None = None

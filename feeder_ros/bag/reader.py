@@ -33,14 +33,17 @@ from feeder_ros.bag.errors import (
     BagWarning,
     MessageDefinitionError,
     MissingBagError,
+    UnsupportedLayoutError,
 )
+from feeder_ros.bag.loss import FileCount, LossCount, count_loss, file_count
 from feeder_ros.bag.msgdef import MsgDefs, normalize_type, parse_ros2msg_schema
-from feeder_ros.bag.scan import ChannelInfo, ChunkData, FileScan
+from feeder_ros.bag.scan import ChannelInfo, ChunkData, FileScan, ScanTally
 from feeder_ros.bag.schemas import installed_definitions
 
 __all__ = [
     "Bag",
     "BagInfo",
+    "Checks",
     "ColumnBatch",
     "RawMessage",
     "TopicInfo",
@@ -94,6 +97,11 @@ class Bag:
         self.cut_short = False
         #: topic -> type of every channel met by a scan that has been read to its end
         self.channel_types: dict[str, str] = {}
+        #: recorded against readable messages, counted by the last pass read to its end (None
+        #: before one); a count that shows lost messages is also reported (``lost_messages``)
+        self.loss: LossCount | None = None
+        #: what each file's scan of that pass met and checked
+        self.tallies: list[ScanTally] = []
         self._defs: dict[tuple[str, str], MsgDefs | None] = {}
         self._plans: dict[tuple[str, str], ColumnPlan] = {}
         if self.path.is_file():
@@ -174,12 +182,23 @@ class Bag:
 
     def scans(self) -> Iterator[FileScan]:
         """One scan per file, in order; after a scan has been read, its channels are added to
-        ``channel_types``."""
+        ``channel_types``. When every scan has been read to its end, the messages found are
+        compared with what the bag says was recorded (``loss``)."""
+        counts: list[FileCount] = []
+        tallies: list[ScanTally] = []
         for path in self.files:
             scan = FileScan(path, self.report, self.verify_crc)
             yield scan
             for channel in scan.channels.values():
                 self.channel_types.setdefault(channel.topic, channel.type)
+            counts.append(file_count(scan))
+            tallies.append(scan.tally)
+        self.tallies = tallies
+        missing = [p.file for p in self.problems if p.kind == "missing_file" and p.file]
+        self.loss = count_loss(self.metadata, counts, missing)
+        problem = self.loss.problem()
+        if problem is not None and problem not in self.problems:
+            self.report(problem)
 
     def definitions(self, channel: ChannelInfo) -> MsgDefs | None:
         """Parsed definitions for a channel: its ros2msg schema, else the installed .msg files."""
@@ -421,10 +440,40 @@ class TopicInfo:
     last_ns: int | None
 
 
+@dataclass(frozen=True)
+class Checks:
+    """What a pass over the bag read and checked (``feeder info`` prints it)."""
+
+    files: int
+    chunks: int  # chunk records met
+    decompressed: int  # chunks decompressed (every chunk with ``verify``)
+    crc_checked: int  # chunks whose CRC-32 was compared
+    frame_checked: int  # zstd chunks whose frame checksum zstd verified
+    located: int  # message records located in decompressed chunks, checked against the indexes
+    verified: bool = False  # every chunk decompressed and every message decoded
+    decoded: int = 0  # messages CDR-decoded field by field (``verify``)
+    undecodable: int = 0  # messages not decoded: no definition of their type, or not CDR
+
+    @classmethod
+    def of(cls, tallies: Sequence[ScanTally], verified: bool, decoded: int, skipped: int) -> Checks:
+        return cls(
+            files=len(tallies),
+            chunks=sum(t.chunks for t in tallies),
+            decompressed=sum(t.decompressed for t in tallies),
+            crc_checked=sum(t.crc_checked for t in tallies),
+            frame_checked=sum(t.frame_checked for t in tallies),
+            located=sum(t.located for t in tallies),
+            verified=verified,
+            decoded=decoded,
+            undecodable=skipped,
+        )
+
+
 @dataclass
 class BagInfo:
     """What a bag holds, counted from its data (not from metadata.yaml, which a killed writer leaves
-    stale): topics, message counts, time range, files, and the problems found."""
+    stale): topics, message counts, time range, files, the problems found, and how many recorded
+    messages are lost (``loss``: metadata.yaml's and the summaries' counts against the data)."""
 
     path: Path
     files: list[Path]
@@ -435,6 +484,8 @@ class BagInfo:
     cut_short: bool
     problems: list[BagProblem]
     metadata: dict[str, Any] | None
+    loss: LossCount | None = None
+    checks: Checks | None = None
 
     @property
     def duration_ns(self) -> int:
@@ -448,25 +499,84 @@ class BagInfo:
         return data_lost(self.problems, self.files)
 
 
+def _count_chunk(topics: dict[str, TopicInfo], scan: FileScan, chunk: ChunkData) -> None:
+    for cid, times in chunk.log_times.items():
+        channel = scan.channels[cid]
+        info = topics.get(channel.topic)
+        if info is None:
+            info = TopicInfo(channel.topic, channel.type, 0, None, None)
+            topics[channel.topic] = info
+        if len(times) == 0:
+            continue
+        info.message_count += len(times)
+        lo, hi = int(times.min()), int(times.max())
+        info.first_ns = lo if info.first_ns is None else min(info.first_ns, lo)
+        info.last_ns = hi if info.last_ns is None else max(info.last_ns, hi)
+
+
+def _decode_chunk(bag: Bag, scan: FileScan, chunk: ChunkData) -> tuple[int, int]:
+    """Decode every message of a decompressed chunk field by field (``verify``): messages that
+    end before their last field are reported as ``malformed_message``. Returns (decoded, not
+    decoded: no definition of the type, or not CDR)."""
+    decoded = skipped = 0
+    for cid, records in chunk.records.items():
+        channel = scan.channels[cid]
+        if channel.message_encoding != "cdr":
+            skipped += len(records)
+            continue
+        try:
+            plan = bag.plan(channel)
+        except UnsupportedLayoutError:  # no column layout: decode message by message
+            decoded += _decode_each(bag, chunk, channel)
+            continue
+        if plan is None:
+            skipped += len(records)
+            continue
+        for batch in _decode_batch(bag, chunk, channel, plan, plan.select(None)):
+            decoded += len(batch)
+    return decoded, skipped
+
+
+def _decode_each(bag: Bag, chunk: ChunkData, channel: ChannelInfo) -> int:
+    defs = bag.definitions(channel)
+    if defs is None:
+        return 0
+    decoded = bad = 0
+    for cid, _, _, data in chunk.messages():
+        if cid != channel.id:
+            continue
+        try:
+            decode_cdr(data, defs, channel.type)
+            decoded += 1
+        except (BagError, ValueError, IndexError, KeyError, UnicodeDecodeError):
+            bad += 1
+    if bad:
+        bag.report(
+            BagProblem(
+                "malformed_message",
+                chunk.file,
+                f"{bad} {channel.type} message(s) cannot be decoded",
+                chunk.offset,
+                channel.topic,
+            )
+        )
+    return decoded
+
+
 def bag_info(bag: Bag | str | os.PathLike[str], *, verify: bool = False) -> BagInfo:
     """Count messages per topic and the time range by scanning the message indexes (and walking
-    chunks without indexes). ``verify=True`` also decompresses and CRC-checks every chunk."""
+    chunks without indexes), and how many recorded messages are lost. ``verify=True`` also
+    decompresses and CRC-checks every chunk, checks every message record against its index and
+    decodes every message whose type is known (a malformed one is reported)."""
     bag = _as_bag(bag)
     topics: dict[str, TopicInfo] = {}
+    decoded = skipped = 0
     for scan in bag.scans():
         for chunk in scan.chunks(lambda _c: True, decode=verify):
-            for cid, times in chunk.log_times.items():
-                channel = scan.channels[cid]
-                info = topics.get(channel.topic)
-                if info is None:
-                    info = TopicInfo(channel.topic, channel.type, 0, None, None)
-                    topics[channel.topic] = info
-                if len(times) == 0:
-                    continue
-                info.message_count += len(times)
-                lo, hi = int(times.min()), int(times.max())
-                info.first_ns = lo if info.first_ns is None else min(info.first_ns, lo)
-                info.last_ns = hi if info.last_ns is None else max(info.last_ns, hi)
+            _count_chunk(topics, scan, chunk)
+            if verify:
+                done, left = _decode_chunk(bag, scan, chunk)
+                decoded, skipped = decoded + done, skipped + left
         for channel in scan.channels.values():
             topics.setdefault(channel.topic, TopicInfo(channel.topic, channel.type, 0, None, None))
     firsts = [t.first_ns for t in topics.values() if t.first_ns is not None]
@@ -481,4 +591,6 @@ def bag_info(bag: Bag | str | os.PathLike[str], *, verify: bool = False) -> BagI
         cut_short=bag.cut_short,
         problems=list(bag.problems),
         metadata=bag.metadata,
+        loss=bag.loss,
+        checks=Checks.of(bag.tallies, verify, decoded, skipped),
     )

@@ -11,6 +11,10 @@ rewritten (its incomplete last record is all it loses). A file damaged otherwise
 corrupt chunk or record, unreadable) is left byte for byte as it is, with a ``not_finished``
 problem naming why, and a split file listed in metadata.yaml but missing stays listed (with what the
 old metadata.yaml said of it), so the bag keeps saying that part of the recording is gone.
+
+The messages the bag lost (the old metadata.yaml's and the files' own counts against what can be
+read, :mod:`feeder_ros.bag.loss`) are counted before the rewrite and kept in the new metadata.yaml's
+``custom_data``: a repaired bag still says how many recorded messages it lost.
 """
 
 from __future__ import annotations
@@ -21,6 +25,14 @@ from pathlib import Path
 from typing import Any
 
 from feeder_ros.bag.errors import BagProblem, MissingBagError
+from feeder_ros.bag.loss import (
+    LOST_BY_TOPIC_KEY,
+    LOST_KEY,
+    FileCount,
+    count_loss,
+    file_count,
+    lost_custom_data,
+)
 from feeder_ros.bag.reader import Bag, BagInfo, _file_index, bag_info
 from feeder_ros.bag.scan import ChannelInfo, FileScan
 from feeder_ros.bag.schemas import type_description_hash
@@ -55,14 +67,18 @@ def _topic_of(channel: ChannelInfo) -> _Topic:
 
 #: problems after which a cut-short file is still rewritten: they concern single messages, which
 #: the rewrite copies byte for byte
-_HARMLESS_TO_REWRITE = frozenset({"cut_short", "malformed_message", "unsupported_encoding"})
+#: (the messages of a chunk the file's end cut off are lost with or without the rewrite)
+_HARMLESS_TO_REWRITE = frozenset(
+    {"cut_short", "cut_chunk", "malformed_message", "unsupported_encoding"}
+)
 
 
 def _count(
     path: Path, report: Callable[[BagProblem], None], topics: dict[str, _Topic]
-) -> tuple[_FileStats, bool]:
-    """Messages per topic and time range of one file (from its indexes); is the file complete?
-    ``topics`` is keyed by name and type: one name may carry two types."""
+) -> tuple[_FileStats, FileCount]:
+    """Messages per topic and time range of one file (from its indexes), and its counts for the
+    loss (``FileCount.complete``: the file is complete). ``topics`` is keyed by name and type:
+    one name may carry two types."""
     stats = _FileStats(path)
     scan = FileScan(path, report)
     for chunk in scan.chunks(lambda _c: True, decode=False):
@@ -78,7 +94,7 @@ def _count(
             stats.end = hi if stats.end is None else max(stats.end, hi)
     for channel in scan.channels.values():
         topics.setdefault(f"{channel.topic}\0{channel.type}", _topic_of(channel))
-    return stats, scan.complete
+    return stats, file_count(scan)
 
 
 def _finish(path: Path, bag: Bag, compression: str, meta_text: str, distro: str) -> None:
@@ -176,6 +192,7 @@ def reindex(
     distro = str(old.get("ros_distro") or ros_distro_in_use())
     topics: dict[str, _Topic] = {}
     files: list[_FileStats] = []
+    counts: list[FileCount] = []
     cut_short: list[int] = []
     for file in bag.files:
         found: list[BagProblem] = []
@@ -184,15 +201,20 @@ def reindex(
             found.append(problem)
             bag.report(problem)
 
-        stats, complete = _count(file, report, topics)
+        stats, count = _count(file, report, topics)
         files.append(stats)
-        if complete:
+        counts.append(count)
+        if count.complete:
             continue
         damage = {p.kind for p in found} - _HARMLESS_TO_REWRITE
         if not damage:
             cut_short.append(len(files) - 1)
         elif finish_files:
             bag.report(_not_finished(file, damage))
+    missing = [p.file for p in bag.problems if p.kind == "missing_file" and p.file]
+    loss = count_loss(bag.metadata, counts, missing)
+    custom = {k: v for k, v in custom.items() if k not in (LOST_KEY, LOST_BY_TOPIC_KEY)}
+    custom.update(lost_custom_data(loss))
     if finish_files and cut_short:
         meta_text = metadata_yaml(bag_metadata(files, list(topics.values()), custom, distro), True)
         for index in cut_short:
@@ -202,7 +224,6 @@ def reindex(
     meta = bag_metadata(files, list(topics.values()), custom, distro)
     _keep_missing(meta, old, bag)
     write_metadata_file(directory, metadata_yaml(meta))
-    problems: list[BagProblem] = list(bag.problems)
-    info = bag_info(Bag(directory, warn=False))
-    info.problems = problems + info.problems
+    info = bag_info(Bag(directory, warn=False))  # counts the loss the new metadata.yaml keeps
+    info.problems = list(bag.problems) + info.problems
     return info

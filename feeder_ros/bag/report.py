@@ -1,5 +1,11 @@
 """Presentation of :mod:`feeder_ros.bag.analysis` results: terminal tables, CSV, JSON, PNG plots
-(matplotlib, Agg backend) and one self-contained HTML report (images embedded as base64)."""
+(matplotlib, Agg backend) and one self-contained HTML report (images embedded as base64).
+
+One section per analysed feeder. A bag holding several feeders gives one section per feeder,
+headed ``<bag> [<namespace>]``, and one set of files each, named ``<bag>_<namespace>_*``
+(``/cell/feeder_a`` -> ``bag_cell_feeder_a_segments.csv``); ``comparison.csv`` and
+``analysis.json`` have a ``namespace`` column / key. What the bag lost is given as a count of
+messages (recorded, lost; per topic in the JSON)."""
 
 from __future__ import annotations
 
@@ -57,6 +63,7 @@ def segment_rows(analysis: BagAnalysis) -> list[dict[str, Any]]:
                 "speed_ground_truth_mm_s": s.speed_ground_truth_mps * 1e3,
                 "speed_sensors_mm_s": s.speed_sensors_mps * 1e3,
                 "transits": s.transits,
+                "transits_left_out": s.transits_left_out,
                 "slip_estimate": s.slip_estimate,
                 "slip_ground_truth": s.slip_ground_truth,
                 "parts_exited": s.parts_exited,
@@ -73,6 +80,7 @@ def comparison_rows(analyses: Sequence[BagAnalysis]) -> list[dict[str, Any]]:
         rows.append(
             {
                 "bag": str(a.path),
+                "namespace": a.namespace or "",
                 "status": _status(a),
                 "duration_s": totals.get("duration_s", math.nan),
                 "segments": len(a.segments),
@@ -80,11 +88,21 @@ def comparison_rows(analyses: Sequence[BagAnalysis]) -> list[dict[str, Any]]:
                 "slip_fraction": totals.get("slip_fraction", math.nan),
                 "parts_exited": int(totals.get("parts_exited", 0)),
                 "feed_rate_per_min": totals.get("feed_rate_per_min", math.nan),
+                "lost_messages": "" if a.loss is None else a.loss.lost,
                 "problems": len(a.problems),
                 "error": a.error or "",
             }
         )
     return rows
+
+
+def _lost_topics(a: BagAnalysis) -> str:
+    """The topics that lost messages, "/a/imu 20 of 500, ..." (with several feeders in the bag,
+    this feeder's; the bag's total is in ``loss_summary``)."""
+    if a.loss is None:
+        return ""
+    topics = [t for t in a.loss.lost_topics() if a.owns(t.topic)]
+    return ", ".join(f"{t.topic} {t.lost} of {t.recorded}" for t in topics)
 
 
 def _status(a: BagAnalysis) -> str:
@@ -108,13 +126,13 @@ def format_summary(analyses: Sequence[BagAnalysis]) -> str:
     parts: list[str] = []
     for a in analyses:
         if not a.ok:
-            parts.append(f"{a.path}: cannot analyse: {a.error}")
+            parts.append(f"{a.label}: cannot analyse: {a.error}")
             continue
         head = (
-            f"{a.path}: {a.duration_s:.3f} s, drive from {a.drive_source}, "
+            f"{a.label}: {a.duration_s:.3f} s, drive from {a.drive_source}, "
             f"{len(a.segments)} segment(s)"
             + (f" (+{a.transient_segments} transient)" if a.transient_segments else "")
-            + (", CUT SHORT (the recorder did not close the bag)" if a.cut_short else "")
+            + (", CUT SHORT (a file ends without its summary)" if a.cut_short else "")
         )
         parts.append(head)
         if a.data_lost:
@@ -122,6 +140,11 @@ def format_summary(analyses: Sequence[BagAnalysis]) -> str:
                 f"  DATA LOST: {a.loss_summary()}: counts, exits and feed rates are short "
                 "(see the problems below)"
             )
+            lost_topics = _lost_topics(a)
+            if lost_topics:
+                parts.append(f"  lost per topic: {lost_topics}")
+        elif a.loss is not None and not a.loss.exact:
+            parts.append(f"  messages recorded: unknown ({'; '.join(a.loss.unknown)})")
         counts = ", ".join(f"{k.rsplit('/', 1)[-1]} {v}" for k, v in sorted(a.messages.items()))
         if counts:
             parts.append(f"  messages: {counts}")
@@ -172,7 +195,7 @@ def format_summary(analyses: Sequence[BagAnalysis]) -> str:
                 ["bag", "status", "time [s]", "segments", "speed [mm/s]", "slip", "exits", "feed"],
                 [
                     [
-                        r["bag"],
+                        r["bag"] + (f" [{r['namespace']}]" if r["namespace"] else ""),
                         r["status"],
                         _fmt(r["duration_s"], "{:.2f}"),
                         str(r["segments"]),
@@ -316,7 +339,7 @@ def write_outputs(analyses: Sequence[BagAnalysis], directory: Path) -> list[Path
 
     sections: list[str] = []
     for stem, a in zip(_stems(analyses), analyses, strict=True):
-        sections.append(f"<h2>{html.escape(str(a.path))}</h2>")
+        sections.append(f"<h2>{html.escape(a.label)}</h2>")
         if not a.ok:
             sections.append(f"<p class='error'>cannot analyse: {html.escape(a.error or '')}</p>")
             continue
@@ -325,9 +348,12 @@ def write_outputs(analyses: Sequence[BagAnalysis], directory: Path) -> list[Path
             f"{len(a.segments)} segment(s)" + (", <b>cut short</b>" if a.cut_short else "") + "</p>"
         )
         if a.data_lost:
+            lost_topics = _lost_topics(a)
             sections.append(
                 f"<p class='error'><b>Data lost</b>: {html.escape(a.loss_summary())}: counts, "
-                "exits and feed rates are short.</p>"
+                "exits and feed rates are short"
+                + (f" (per topic: {html.escape(lost_topics)})" if lost_topics else "")
+                + ".</p>"
             )
         rows = segment_rows(a)
         put(f"{stem}_segments.csv", _csv(rows))

@@ -28,7 +28,7 @@ from feeder_ros.bag.errors import BagProblem
 from feeder_ros.bag.mcap_format import MAGIC, Op
 from feeder_ros.bag.msgdef import normalize_type
 
-__all__ = ["ChannelInfo", "ChunkData", "FileScan"]
+__all__ = ["ChannelInfo", "ChunkData", "FileScan", "ScanTally"]
 
 IntArray = npt.NDArray[np.int64]
 _U16 = struct.Struct("<H")
@@ -38,6 +38,8 @@ _RECORD = struct.Struct("<BQ")
 _CHUNK_HEAD = struct.Struct("<QQQI")
 _LOOSE_LIMIT = 4 << 20
 _MAX_CHUNK = 1 << 31  # larger uncompressed chunks are taken for corruption, not allocated
+_CUT_READ = 256 << 20  # of a chunk the file's end cut off, at most this much is read to count
+_CUT_PIECE = 1024  # compressed bytes fed at a time when counting it (bounds the output kept)
 _KNOWN_OPS = frozenset(range(0x01, 0x10))
 
 
@@ -52,6 +54,28 @@ class ChannelInfo:
     schema_encoding: str
     schema_text: str
     metadata: dict[str, str] = field(default_factory=dict)
+
+
+@dataclass
+class ScanTally:
+    """What one pass over a file met, per channel id: the messages it located (readable) and the
+    messages of chunks it had to skip or that the file's end cut off (lost, as far as their message
+    indexes or the readable part of a cut chunk tell), and what was checked (``feeder info``)."""
+
+    chunks: int = 0  # chunk records met
+    decompressed: int = 0  # of those, decompressed (all with --verify; otherwise where needed)
+    crc_checked: int = 0  # decompressed chunks whose CRC-32 was compared
+    frame_checked: int = 0  # zstd chunks whose frame checksum zstd verified while decompressing
+    located: int = 0  # message records located in decompressed chunks (checked against the index)
+    readable: dict[int, int] = field(default_factory=dict)
+    lost: dict[int, int] = field(default_factory=dict)
+    #: chunks skipped or cut off whose message count nothing tells (no usable message index)
+    uncounted_chunks: int = 0
+
+    @staticmethod
+    def count(counts: dict[int, int], cid: int, n: int) -> None:
+        """Add ``n`` messages of channel ``cid`` (-1: a channel that cannot be told)."""
+        counts[cid] = counts.get(cid, 0) + n
 
 
 @dataclass
@@ -144,6 +168,7 @@ class FileScan:
         self.metadata: dict[str, dict[str, str]] = {}
         self.complete = False
         self.statistics: dict[str, Any] | None = None
+        self.tally = ScanTally()
         self._pending_channels: dict[int, tuple[int, str, str, dict[str, str]]] = {}
 
     # ------------------------------------------------------------------ records
@@ -202,6 +227,7 @@ class FileScan:
             "chunk_count": chunks,
             "start": start,
             "end": end,
+            "channel_message_counts": _channel_counts(body),
         }
 
     # ------------------------------------------------------------------ scan
@@ -245,6 +271,8 @@ class FileScan:
                     "read up to the last complete chunk",
                     pos,
                 )
+                if head:
+                    self._cut_record(head[0], pos, b"", size)
                 return
             op, length = _RECORD.unpack(head)
             if op not in _KNOWN_OPS or length > size - pos - 9:
@@ -275,6 +303,9 @@ class FileScan:
                     else "cut_short"
                 )
                 self._problem(kind, f"{what}; read up to the last complete chunk", pos)
+                if kind == "cut_short":
+                    f.seek(pos + 9)
+                    self._cut_record(op, pos, f.read(_CUT_READ), size)
                 return
             if op == Op.MESSAGE_INDEX and pending is not None:
                 body = f.read(length)
@@ -371,6 +402,7 @@ class FileScan:
         trust_index: bool,
     ) -> Iterator[ChunkData]:
         body = chunk.body
+        self.tally.chunks += 1
         try:
             start, end, usize, crc = _CHUNK_HEAD.unpack_from(body, 0)
             compression, pos = _read_str(body, 28)
@@ -384,12 +416,16 @@ class FileScan:
                 f"cannot parse the chunk header ({err}); chunk skipped",
                 chunk.offset,
             )
+            self._count_skipped(chunk)
             return
         lost = max(end - start, 0)  # the recording time a skip of this chunk loses
         index = self._parse_indexes(chunk) if trust_index and chunk.indexes else None
         if index is not None:
             known = all(cid in self.channels for cid in index)
             wanted = [cid for cid in index if cid in self.channels and want(self.channels[cid])]
+            if known and (not wanted or not decode):  # counted from the message indexes
+                for cid, (stamps, _) in index.items():
+                    self.tally.count(self.tally.readable, cid, len(stamps))
             if known and not wanted:
                 return
             if not decode and known:
@@ -404,6 +440,7 @@ class FileScan:
                 chunk.offset,
                 lost_ns=lost,
             )
+            self._count_skipped(chunk)
             return
         checksummed = False  # zstd verifies its own frame checksum (XXH64) while decompressing
         try:
@@ -421,6 +458,7 @@ class FileScan:
                     chunk.offset,
                     lost_ns=lost,
                 )
+                self._count_skipped(chunk)
                 return
         except Exception as err:  # zstd/lz4 raise their own error types
             self._problem(
@@ -429,6 +467,7 @@ class FileScan:
                 chunk.offset,
                 lost_ns=lost,
             )
+            self._count_skipped(chunk)
             return
         if len(raw) != usize:
             self._problem(
@@ -437,20 +476,84 @@ class FileScan:
                 chunk.offset,
                 lost_ns=lost,
             )
+            self._count_skipped(chunk)
             return
-        if crc and self.verify_crc and not checksummed and zlib.crc32(raw) != crc:
-            self._problem(
-                "corrupt_chunk",
-                "CRC mismatch of the uncompressed records; chunk skipped",
-                chunk.offset,
-                lost_ns=lost,
-            )
-            return
+        self.tally.decompressed += 1
+        self.tally.frame_checked += checksummed
+        if crc and self.verify_crc and not checksummed:
+            self.tally.crc_checked += 1
+            if zlib.crc32(raw) != crc:
+                self._problem(
+                    "corrupt_chunk",
+                    "CRC mismatch of the uncompressed records; chunk skipped",
+                    chunk.offset,
+                    lost_ns=lost,
+                )
+                self._count_skipped(chunk)
+                return
         buf = np.frombuffer(raw, np.uint8)
         if index is not None:
             yield from self._indexed(buf, chunk.offset, index, want)
         else:
             yield from self._walk(buf, chunk.offset, want)
+
+    def _count_skipped(self, chunk: _PendingChunk) -> None:
+        """The messages of a skipped chunk are lost: count them from its message indexes (the
+        records after the chunk), or count the chunk as one whose messages nothing counts."""
+        index = self._parse_indexes(chunk) if chunk.indexes else None
+        if index is None:
+            self.tally.uncounted_chunks += 1
+            return
+        for cid, (stamps, _) in index.items():
+            self.tally.count(self.tally.lost, cid, len(stamps))
+
+    def _cut_record(self, op: int, pos: int, body: bytes, size: int) -> None:
+        """The file ends inside the record at ``pos`` (``body``: what there is of its content). A
+        chunk or message cut off this way held messages that are lost: count those whose records
+        are complete in the readable part of the chunk (a lower bound: the rest of it is gone)."""
+        if op == Op.MESSAGE:
+            cid = _U16.unpack_from(body, 0)[0] if len(body) >= 2 else -1
+            self.tally.count(self.tally.lost, cid, 1)
+            self._problem("cut_chunk", "the file ends inside a message record: 1 message lost", pos)
+            return
+        if op != Op.CHUNK:
+            return
+        counted, what, lost_ns = self._count_cut_chunk(body)
+        self.tally.uncounted_chunks += 1  # what the missing part of the chunk held is not known
+        for cid, n in counted.items():
+            self.tally.count(self.tally.lost, cid, n)
+        total = sum(counted.values())
+        lost = f"at least {total} message(s) lost with it" if total else "its messages are lost"
+        self._problem(
+            "cut_chunk",
+            f"the file ends inside a chunk ({size - pos} bytes of it present; {what}): {lost}",
+            pos,
+            lost_ns=lost_ns,
+        )
+
+    def _count_cut_chunk(self, body: bytes) -> tuple[dict[int, int], str, int | None]:
+        """Messages per channel id whose records are complete in the readable part of a chunk cut
+        off by the file's end; a description of that part; the time span of the chunk [ns]."""
+        try:
+            start, end, usize, _ = _CHUNK_HEAD.unpack_from(body, 0)
+            compression, pos = _read_str(body, 28)
+        except (ValueError, struct.error):
+            return {}, "its header is incomplete", None
+        raw = _decompress_prefix(compression, body[pos + 8 :], min(usize, _MAX_CHUNK))
+        counted: dict[int, int] = {}
+        at = 0
+        while at + 9 <= len(raw):
+            rop, length = _RECORD.unpack_from(raw, at)
+            if at + 9 + length > len(raw):
+                break
+            if rop == Op.MESSAGE and length >= 2:
+                cid = _U16.unpack_from(raw, at + 9)[0]
+                counted[cid] = counted.get(cid, 0) + 1
+            elif rop in (Op.SCHEMA, Op.CHANNEL):
+                self._inner_record(rop, memoryview(raw)[at + 9 : at + 9 + length], 0)
+            at += 9 + length
+        what = f"{len(raw)} of its {usize} bytes of records could be decompressed"
+        return counted, what, max(end - start, 0) or None
 
     def _parse_indexes(self, chunk: _PendingChunk) -> dict[int, tuple[IntArray, IntArray]] | None:
         out: dict[int, tuple[IntArray, IntArray]] = {}
@@ -516,8 +619,13 @@ class FileScan:
     ) -> Iterator[ChunkData]:
         chunk = ChunkData(self.path, offset, buf, {}, {})
         single = len(present) == 1
+        self.tally.located += len(offs)
         for cid in present:
             channel = self.channels.get(cid)
+            counts = self.tally.readable if channel is not None else self.tally.lost
+            self.tally.count(
+                counts, cid, len(offs) if single else int(np.count_nonzero(cids == cid))
+            )
             if channel is None:
                 self._problem(
                     "unknown_channel", f"messages of channel {cid}, which was never defined", offset
@@ -572,15 +680,19 @@ class FileScan:
             if pos + 9 + length > size:
                 self._problem(
                     "corrupt_chunk",
-                    f"a record at byte {pos} of the chunk runs past its end",
+                    f"a record at byte {pos} of the chunk runs past its end; the rest of the "
+                    "chunk skipped",
                     offset,
                 )
+                self.tally.uncounted_chunks += 1
                 break
             if op == Op.MESSAGE:
                 if length < 22:
                     self._problem(
                         "corrupt_chunk", f"a message record at byte {pos} is too short", offset
                     )
+                    cid = u16(raw, pos + 9)[0] if length >= 2 else -1
+                    self.tally.count(self.tally.lost, cid, 1)
                 else:
                     found.setdefault(u16(raw, pos + 9)[0], []).append(pos)
             else:
@@ -595,6 +707,41 @@ class FileScan:
         heads = _headers(buf, offs)
         ends = offs + 9 + heads["length"].astype(np.int64)
         yield from self._emit(buf, offset, offs, cids, heads, ends, want, sorted(found))
+
+
+def _decompress_prefix(compression: str, data: bytes, limit: int) -> bytes:
+    """What can be decompressed of the start of a chunk's data (at most ``limit`` bytes; fed in
+    small pieces so that a damaged frame cannot expand far past it); b"" when nothing can."""
+    out = bytearray()
+    try:
+        if compression == "zstd":
+            stream = zstandard.ZstdDecompressor().decompressobj()
+            for at in range(0, len(data), _CUT_PIECE):
+                out += stream.decompress(data[at : at + _CUT_PIECE])
+                if len(out) >= limit:
+                    break
+        elif compression == "lz4":
+            out += lz4.frame.LZ4FrameDecompressor().decompress(data, max_length=limit)
+        elif compression == "":
+            out += data[:limit]
+    except Exception:  # zstd/lz4 raise their own error types: what came out before counts
+        pass
+    return bytes(out[:limit])
+
+
+def _channel_counts(body: bytes) -> dict[int, int] | None:
+    """The per-channel message counts of a Statistics record (None: absent or malformed; the
+    total still counts)."""
+    if len(body) < 46:
+        return None
+    (size,) = _U32.unpack_from(body, 42)
+    if size % 10 or 46 + size > len(body):
+        return None
+    counts: dict[int, int] = {}
+    for at in range(46, 46 + size, 10):
+        cid, n = struct.unpack_from("<HQ", body, at)
+        counts[cid] = n
+    return counts
 
 
 def _headers(buf: npt.NDArray[np.uint8], offs: IntArray) -> npt.NDArray[Any]:

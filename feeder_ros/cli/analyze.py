@@ -1,10 +1,12 @@
 """``feeder analyze BAG [BAG ...]``: segments, speeds, slip, feed rate, diagnostics, sweeps.
 
 The work is in :mod:`feeder_ros.bag.analysis` (streaming, ROS free) and
-:mod:`feeder_ros.bag.report` (tables, CSV, JSON, plots, HTML). Exit status: 0 when every bag was
-analysed whole; 1 when some bag could not be analysed or lost data inside its span (corrupt chunks
-skipped: its counts and feed rates are short), the others' results printed and written all the
-same; 2 when none could be analysed.
+:mod:`feeder_ros.bag.report` (tables, CSV, JSON, plots, HTML). A bag holding several feeders (a
+cell recorded under ``/``) is analysed per feeder, told apart by namespace: one section and one set
+of files per feeder (``--namespace NS`` picks one). Exit status: 0 when every bag was analysed
+whole; 1 when some bag could not be analysed or lost recorded messages (counted from metadata.yaml
+and the MCAP summaries against what can be read: its counts and feed rates are short), the others'
+results printed and written all the same; 2 when none could be analysed.
 """
 
 from __future__ import annotations
@@ -14,23 +16,36 @@ import sys
 from pathlib import Path
 
 from feeder_ros.cli.arguments import non_negative_float
-from feeder_ros.cli.outputs import check_output_dir, finish_output_dir
+from feeder_ros.cli.outputs import (
+    check_apart_from_inputs,
+    check_output_dir,
+    finish_output_dir,
+    output_path,
+)
 from feeder_ros.cli.progress import ProgressBar
 
 __all__ = ["EPILOG", "HELP", "add_arguments", "run"]
 
 HELP = "analyse recorded feeder bags: drive segments, part speed, slip, feed rate, diagnostics"
 EPILOG = (
-    "exit status: 0 every bag analysed whole; 1 some bag could not be analysed or lost data "
-    "inside its span (corrupt chunks skipped: its counts and feed rates are short), the other "
-    "results printed and written all the same; 2 no bag could be analysed"
+    "A bag with several feeders (topics /feeder_a/carrier/state, /feeder_b/carrier/state, ...) is "
+    "analysed per feeder: one section, and files named <bag>_<namespace>_*, per feeder. "
+    "Lost messages are counted (metadata.yaml's and the MCAP summaries' counts against what can "
+    "be read) and printed in total and per feeder. Sensor transit speeds count only transits "
+    "that passed both sensors within one drive setting (not across a change or its ramp). "
+    "Exit status: 0 every bag analysed whole; 1 some bag could not be analysed or lost recorded "
+    "messages (a truncated file, corrupt chunks, a missing split file: its counts and feed rates "
+    "are short), the other results printed and written all the same; 2 no bag could be analysed"
 )
 
 
 def add_arguments(parser: argparse.ArgumentParser) -> None:
     parser.add_argument("bags", nargs="+", type=Path, metavar="BAG", help="bag directory or .mcap")
     parser.add_argument(
-        "--output", type=Path, metavar="DIR", help="write CSV, JSON, PNG plots and report.html here"
+        "--output",
+        type=output_path,
+        metavar="DIR",
+        help="write CSV, JSON, PNG plots and report.html here",
     )
     parser.add_argument(
         "--min-segment",
@@ -38,6 +53,12 @@ def add_arguments(parser: argparse.ArgumentParser) -> None:
         default=0.5,
         metavar="S",
         help="segments shorter than this (ramps) are left out (default 0.5 s)",
+    )
+    parser.add_argument(
+        "--namespace",
+        metavar="NS",
+        help="analyse only the feeder under this namespace (e.g. /feeder_a) of bags holding "
+        "several; default: every feeder, each on its own",
     )
     parser.add_argument(
         "--progress", action="store_true", help="show a progress bar even if stderr is not a TTY"
@@ -66,11 +87,14 @@ def run(args: argparse.Namespace) -> int:
     from feeder_ros.bag.analysis import analyze_bags
     from feeder_ros.bag.report import format_summary, write_outputs
 
-    check_output_dir(args.output, "--output")
+    check_apart_from_inputs(args.output, "--output", args.bags)
+    check_output_dir(args.output, "--output", holds="report files (CSV, JSON, PNG, HTML)")
     show = bool(args.progress) or sys.stderr.isatty()
     bar = _BagProgress([str(p) for p in args.bags], show)
     try:
-        analyses = analyze_bags(args.bags, min_segment_s=args.min_segment, progress=bar)
+        analyses = analyze_bags(
+            args.bags, min_segment_s=args.min_segment, namespace=args.namespace, progress=bar
+        )
     finally:
         bar.close()
     if not any(a.ok for a in analyses):
@@ -91,7 +115,7 @@ def run(args: argparse.Namespace) -> int:
             status = 1
         elif a.data_lost:
             print(
-                f"feeder analyze: {a.path}: data lost ({a.loss_summary()}): its counts and "
+                f"feeder analyze: {a.label}: data lost ({a.loss_summary()}): its counts and "
                 "feed rates are short",
                 file=sys.stderr,
             )

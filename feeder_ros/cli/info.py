@@ -1,10 +1,14 @@
 """``feeder info BAG``: what a recorded bag holds (``ros2 bag info`` is not installed here).
 
 Counted from the data (message indexes; ``--verify`` also decompresses and CRC-checks every
-chunk), not from metadata.yaml, which a killed recorder leaves stale. Exit status: 0 every
-recorded message readable (a last file cut short by a killed recorder included: its messages
-are read all the same); 1 some recorded messages are lost (corrupt chunks, missing files, ...);
-2 not a bag.
+chunk, checks every message record against its index and decodes every message), not from
+metadata.yaml, which a killed recorder leaves stale. What was recorded is counted from
+metadata.yaml and the files' MCAP summaries (statistics) and damaged chunks' message indexes:
+the messages lost are given as a number, in total and per topic (a lower bound when a file cut
+short leaves the total unknown). Exit status: 0 every recorded message readable (a last file cut
+short at a chunk boundary by a killed recorder included: its messages are read all the same, and
+the total is reported unknown); 1 some recorded messages are lost (fewer readable than the bag
+counts, corrupt chunks, a chunk cut off, missing files, ...); 2 not a bag.
 """
 
 from __future__ import annotations
@@ -17,10 +21,18 @@ from feeder_ros.cli.main import CommandError
 
 __all__ = ["EPILOG", "HELP", "add_arguments", "run"]
 
-HELP = "show a bag's files, time range, topics and message counts, and any damage found"
+HELP = (
+    "show a bag's files, time range, topics and message counts, the messages it lost (counted) "
+    "and any damage found"
+)
 EPILOG = (
-    "exit status: 0 every recorded message readable; 1 some recorded messages lost (listed); "
-    "2 not a bag"
+    "Lost messages are counted: metadata.yaml's and the MCAP summaries' counts against what can "
+    "be read, in total and per topic (a lower bound, said so, when a file cut short leaves the "
+    "total unknown). "
+    "Exit status: 0 every recorded message readable (also a last file a killed recorder left cut "
+    "short at a chunk boundary: total reported unknown); 1 some recorded messages lost (counted "
+    "and listed: fewer readable than recorded, corrupt chunks, a chunk cut off by the end of a "
+    "file, missing files); 2 not a bag"
 )
 
 
@@ -29,7 +41,8 @@ def add_arguments(parser: argparse.ArgumentParser) -> None:
     parser.add_argument(
         "--verify",
         action="store_true",
-        help="also decompress and CRC-check every chunk (reads the whole bag)",
+        help="also decompress and CRC-check every chunk, check every message record against its "
+        "index and decode every message (reads the whole bag); prints what it checked",
     )
     parser.add_argument("--json", action="store_true", help="print JSON instead of text")
 

@@ -5,8 +5,11 @@ metadata.yaml is rewritten from the data, and every file whose one problem is it
 (the recorder killed while writing it) is finished: rewritten from its messages with summary
 and footer, through a temporary file, so an interrupted repair leaves the original. A file with
 other damage (a corrupt chunk, a damaged record, not MCAP at all) is left byte for byte and
-named; a listed file that is missing stays listed. Exit status: 0 the bag is whole now; 1 some
-file could not be finished or recorded messages are lost (listed); 2 not a bag directory.
+named; a listed file that is missing stays listed. The messages lost (the old metadata.yaml's and
+the files' own counts against what can be read) are counted and kept in the new metadata.yaml's
+``custom_data``, so the repaired bag still reports them. Exit status: 0 the bag is whole now; 1 some
+file could not be finished or recorded messages are lost (counted and listed); 2 not a bag
+directory.
 """
 
 from __future__ import annotations
@@ -20,8 +23,10 @@ __all__ = ["EPILOG", "HELP", "add_arguments", "run"]
 
 HELP = "rewrite a bag's metadata.yaml from its data and finish files a killed recorder cut short"
 EPILOG = (
-    "exit status: 0 the bag is whole now; 1 some file left as it was (damaged) or recorded "
-    "messages lost (listed); 2 not a bag directory"
+    "Messages found lost are counted and kept in metadata.yaml (custom_data): the repaired bag "
+    "still reports them. "
+    "Exit status: 0 the bag is whole now; 1 some file left as it was (damaged) or recorded "
+    "messages lost (counted and listed); 2 not a bag directory"
 )
 
 

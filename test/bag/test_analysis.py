@@ -6,6 +6,7 @@ from __future__ import annotations
 import json
 import math
 import re
+import shutil
 from pathlib import Path
 from typing import Any
 
@@ -14,11 +15,13 @@ import pytest
 import yaml
 from diagnostic_msgs.msg import DiagnosticArray, DiagnosticStatus
 from mcap.reader import make_reader
+from mcap.records import Message, MessageIndex
+from mcap.stream_reader import StreamReader
 from rclpy.serialization import serialize_message
 from sensor_msgs.msg import Imu
 from std_msgs.msg import String
 
-from feeder_ros.bag import BagWriter, analysis
+from feeder_ros.bag import BagWriter, accumulator, analysis
 from feeder_ros.bag.analysis import AnalysisError, analyze_bag, analyze_bags
 from feeder_ros.bag.report import format_summary, write_outputs
 from feeder_ros.msg import (
@@ -69,10 +72,13 @@ def write_feeder_bag(
     carrier: bool = True,
     extras: bool = True,
     split_s: int = 0,
+    killed: Path | None = None,
 ) -> None:
     """5 s of a feeder: carrier state (1 kHz), estimate and part states (100 Hz), sensor events,
     exits, drive commands, diagnostics, plus unrelated topics; all stamped on exact grids.
-    ``split_s``: a new file every so many seconds of recording (0: one file)."""
+    ``split_s``: a new file every so many seconds of recording (0: one file). ``killed``: also
+    copy the bag there just before it is closed (every chunk written, the last file without its
+    summary, metadata.yaml as of the last split): what a recorder killed at that moment leaves."""
     with BagWriter(path, chunk_size=chunk_size, max_file_duration_ns=split_s * S) as w:
         topics = {
             "state": (f"{ns}/carrier/state", "feeder_ros/msg/CarrierState"),
@@ -160,6 +166,9 @@ def write_feeder_bag(
                 DiagnosticStatus(level=DiagnosticStatus.OK, name="feeder: sensor", message="ok"),
             ]
             put("diag", array, T0 + second * S + 1)
+        if killed is not None:
+            w.flush()
+            shutil.copytree(path, killed)
 
 
 def check_standard(result: Any, drive_source: str = "carrier state", end_s: float = 4.999) -> None:
@@ -218,13 +227,13 @@ def test_results_do_not_depend_on_chunking(
     write_feeder_bag(tmp_path / "bag", chunk_size=chunk_size, ns="/remapped/feeder_7")
     monkeypatch.setattr(analysis, "_FLUSH_BATCH", 0)
     peak = [0]
-    flush = analysis._Accumulator.flush
+    flush = accumulator.Accumulator.flush
 
     def watched(self: Any, final: bool = False) -> None:
         peak[0] = max(peak[0], self.pending_count)
         flush(self, final)
 
-    monkeypatch.setattr(analysis._Accumulator, "flush", watched)
+    monkeypatch.setattr(accumulator.Accumulator, "flush", watched)
     check_standard(analyze_bag(tmp_path / "bag"))
     if chunk_size == 2048:
         assert 0 < peak[0] < 200  # of 3012 metric samples
@@ -349,15 +358,64 @@ def test_no_feeder_topics(tmp_path: Path) -> None:
         analyze_bag(tmp_path / "bag")
 
 
-def test_truncated_file_gives_partial_results(tmp_path: Path) -> None:
+def listed_counts(bag: Path) -> tuple[int, dict[str, int]]:
+    """What metadata.yaml (written by the writer when it closed the bag) counts: the total and
+    the messages per file."""
+    meta = yaml.safe_load((bag / "metadata.yaml").read_text())["rosbag2_bagfile_information"]
+    return meta["message_count"], {f["path"]: f["message_count"] for f in meta["files"]}
+
+
+def stream_count(mcap: Path) -> int:
+    """Messages the mcap package's stream reader reads from a file, up to where it fails (the
+    chunks before a cut): an independent count of the readable messages."""
+    count = 0
+    with mcap.open("rb") as stream:
+        try:
+            for record in StreamReader(stream).records:
+                count += isinstance(record, Message)
+        except Exception:  # the file's end cut a record: what came before it counts
+            pass
+    return count
+
+
+def messages_per_chunk(mcap: Path) -> list[int]:
+    """Messages in each chunk of a whole file, in file order (the mcap package's stream reader:
+    each chunk's messages are followed by its message indexes)."""
+    counts: list[int] = []
+    current = 0
+    with mcap.open("rb") as stream:
+        for record in StreamReader(stream).records:
+            if isinstance(record, Message):
+                current += 1
+            elif isinstance(record, MessageIndex) and current:
+                counts.append(current)
+                current = 0
+    return counts
+
+
+def test_truncated_file_gives_partial_results_and_counts_the_loss(tmp_path: Path) -> None:
+    """A copy of a closed bag cut in half: what was read is analysed, and the messages past the
+    cut are counted lost (metadata.yaml, written when the bag was closed, counts them)."""
     write_feeder_bag(tmp_path / "bag", chunk_size=8192, extras=False)
+    recorded, _ = listed_counts(tmp_path / "bag")
     mcap = tmp_path / "bag" / "bag_0.mcap"
     data = mcap.read_bytes()
     mcap.write_bytes(data[: len(data) // 2])
+    readable = stream_count(mcap)
+    assert 0 < readable < recorded
     result = analyze_bag(tmp_path / "bag")
     assert result.cut_short
-    assert not result.data_lost  # what was read is whole up to the cut
+    assert result.data_lost
+    assert result.loss is not None
+    assert (result.loss.recorded, result.loss.readable) == (recorded, readable)
+    assert result.loss.lost == recorded - readable
+    assert result.loss.exact
+    assert result.loss_summary().startswith(
+        f"{recorded - readable} of {recorded} recorded messages lost"
+    )
+    assert result.as_dict()["lost_messages"] == recorded - readable
     assert any("[cut_short]" in p for p in result.problems)
+    assert any(p.startswith("[lost_messages]") for p in result.problems)
     assert 0 < result.duration_s < 5.0
     assert result.segments[0].frequency_hz == 30.0
     assert result.segments[0].speed_estimate_mps == pytest.approx(0.001)
@@ -407,6 +465,9 @@ def test_lost_split_file_or_records_are_data_lost(tmp_path: Path, damage: str) -
     # five files of the 1 kHz loop, then more: the events and diagnostics written after it
     assert len(list(path.glob("*.mcap"))) >= 5
     second = path / "bag_1.mcap"
+    recorded, per_file = listed_counts(path)
+    in_second = per_file["bag_1.mcap"]
+    in_chunks = messages_per_chunk(second)
     expected = {
         "missing": "1 missing file(s), about 0.999 s of recording",
         "empty": "1 file(s) that are not MCAP",
@@ -433,9 +494,21 @@ def test_lost_split_file_or_records_are_data_lost(tmp_path: Path, damage: str) -
             w.add_topic("/cell_a/parts/exit", "feeder_ros/msg/PartExit")
             w.write("/cell_a/parts/exit", cdr(PartExit(part_id=99))[:-4], T0 + 4500 * MS)
         (tmp_path / "extra" / "extra_0.mcap").rename(path / "bag_99.mcap")
+    # the messages lost, counted: a missing or empty file's from metadata.yaml, a cut file's
+    # past its cut, a damaged chunk's from the file's summary; a malformed message is readable
+    lost = in_second if damage in ("missing", "empty") else 0
+    if damage == "cut_short":
+        lost = in_second - stream_count(second)
+        assert 0 < lost < in_second
+    elif damage == "record":
+        lost = in_chunks[1]
+    if lost:
+        expected = f"{lost} of {recorded} recorded messages lost, {expected}"
     result = analyze_bag(path)
     assert result.ok
     assert result.data_lost
+    assert result.loss is not None
+    assert result.loss.lost == lost
     assert result.loss_summary() == expected
     assert result.as_dict()["data_losses"] == [str(p) for p in result.data_losses]
     assert all(str(p) in result.problems for p in result.data_losses)
@@ -447,15 +520,32 @@ def test_lost_split_file_or_records_are_data_lost(tmp_path: Path, damage: str) -
     assert "DATA LOST: " + expected in format_summary([result])
 
 
-def test_cut_short_last_file_of_a_split_bag_is_no_loss(tmp_path: Path) -> None:
-    path = tmp_path / "bag"
-    write_feeder_bag(path, chunk_size=8192, extras=False, split_s=1)
+def test_cut_short_last_file_of_a_killed_recorder_is_no_loss(tmp_path: Path) -> None:
+    """A recorder killed between chunks leaves its last file without a summary and metadata.yaml
+    as of its last split: every chunk it wrote is read, nothing is counted lost, and the number
+    recorded is said to be unknown (metadata.yaml does not count the last file)."""
+    path = tmp_path / "killed"
+    write_feeder_bag(tmp_path / "bag", chunk_size=8192, extras=False, split_s=1, killed=path)
     last = max(path.glob("*.mcap"), key=lambda p: int(p.stem.split("_")[1]))
-    last.write_bytes(last.read_bytes()[: last.stat().st_size // 2])
+    assert not last.read_bytes().endswith(b"\x89MCAP0\r\n")  # no footer
+    _, per_file = listed_counts(path)
+    assert per_file[last.name] == 0  # metadata.yaml as the writer left it when it opened the file
     result = analyze_bag(path)
     assert result.cut_short
     assert not result.data_lost
     assert result.data_losses == []
+    assert result.loss is not None
+    assert result.loss.lost == 0
+    assert not result.loss.exact
+    assert result.loss.unknown == (
+        f"{last.name} ends without a summary and metadata.yaml lists 0 message(s) in it, fewer "
+        f"than the {stream_count(last)} found (written before the file was finished)",
+    )
+    assert "messages recorded: unknown" in format_summary([result])
+    whole = analyze_bag(tmp_path / "bag")  # the same recording, closed: nothing was lost
+    assert whole.loss is not None
+    assert (whole.loss.lost, whole.loss.exact) == (0, True)
+    assert result.loss.readable == whole.loss.readable
 
 
 def test_diagnostics_not_in_metadata_yaml_are_found(tmp_path: Path) -> None:

@@ -99,14 +99,22 @@ def test_truncated_file_reads_complete_chunks(tmp_path: Path) -> None:
     assert len(x) == sum(messages_in(c) for c in indexes[:5])
     np.testing.assert_array_equal(x, np.arange(len(x)) * 0.5)
     assert bag.cut_short
-    (problem,) = bag.problems
-    assert problem.kind == "cut_short"
+    # the file is cut, the chunk the cut went through is lost, and metadata.yaml (written when
+    # the bag was closed) counts the 400 messages recorded: the rest are counted lost
+    assert kinds(bag) == ["cut_short", "cut_chunk", "lost_messages"]
+    problem, cut, lost = bag.problems
     assert problem.file == mcap
     assert problem.offset == off
     assert "without a footer" in str(problem) or "file ends" in str(problem)
+    assert (cut.file, cut.offset) == (mcap, off)
+    assert bag.loss is not None
+    assert (bag.loss.recorded, bag.loss.readable, bag.loss.lost) == (400, len(x), 400 - len(x))
+    assert bag.loss.exact
+    assert f"{400 - len(x)} of 400 recorded messages lost" in lost.detail
     info = bag_info(Bag(path, warn=False))
     assert info.cut_short == bag.cut_short
     assert info.message_count == len(x)
+    assert info.loss == bag.loss
 
 
 @pytest.mark.parametrize("cut", [9, 20, 100])
@@ -166,7 +174,10 @@ def test_corrupt_chunk_is_skipped_and_named(tmp_path: Path, compression: str) ->
     data[middle : middle + 8] = bytes(b ^ 0xFF for b in data[middle : middle + 8])
     mcap.write_bytes(bytes(data))
     bag = Bag(path)
-    with pytest.warns(BagWarning, match="chunk skipped"):
+    with (
+        pytest.warns(BagWarning, match="chunk skipped"),
+        pytest.warns(BagWarning, match=rf"\[lost_messages\] {messages_in(indexes[2])} of 300"),
+    ):
         x = read_x(bag)
     assert len(x) == 300 - messages_in(indexes[2])
     # bag_info counts from the message indexes without decompressing; verify=True decompresses.
@@ -193,8 +204,10 @@ def test_crc_check_can_be_switched_off(tmp_path: Path) -> None:
     mcap.write_bytes(bytes(data))
     checked = Bag(path, warn=False)
     assert len(read_x(checked)) == 100 - messages_in(index)
-    assert [p.kind for p in checked.problems] == ["corrupt_chunk"]
+    assert [p.kind for p in checked.problems] == ["corrupt_chunk", "lost_messages"]
     assert "CRC mismatch" in checked.problems[0].detail
+    assert checked.loss is not None
+    assert (checked.loss.recorded, checked.loss.lost) == (100, messages_in(index))
     unchecked = Bag(path, warn=False, verify_crc=False)
     assert len(read_x(unchecked)) == 100
     assert unchecked.problems == []
@@ -222,8 +235,11 @@ def test_bad_record_header_resumes_at_the_next_chunk(tmp_path: Path, damage: str
     skipped = np.setdiff1d(np.arange(200), i)
     first = (indexes[3].message_start_time - T0) // 1_000_000
     np.testing.assert_array_equal(skipped, np.arange(first, first + messages_in(indexes[3])))
-    (problem,) = bag.problems
+    problem, lost = bag.problems
     assert problem.kind == "corrupt_record"
+    assert lost.kind == "lost_messages"
+    assert bag.loss is not None  # counted from the summary's statistics and metadata.yaml
+    assert (bag.loss.recorded, bag.loss.lost, bag.loss.exact) == (200, len(skipped), True)
     assert problem.offset == off
     assert f"bytes {off}..{indexes[4].chunk_start_offset} skipped" in problem.detail
     assert not bag.cut_short
@@ -239,9 +255,12 @@ def test_bad_record_header_without_footer_stops_the_file(tmp_path: Path) -> None
     data[off] = 0x7F
     mcap.write_bytes(bytes(data[: indexes[6].chunk_start_offset]))
     bag = Bag(path, warn=False)
-    assert len(read_x(bag)) == sum(messages_in(c) for c in indexes[:3])
-    assert [p.kind for p in bag.problems] == ["corrupt_record"]
+    read = sum(messages_in(c) for c in indexes[:3])
+    assert len(read_x(bag)) == read
+    assert [p.kind for p in bag.problems] == ["corrupt_record", "lost_messages"]
     assert "unknown opcode 0x7f" in str(bag.problems[0])
+    assert bag.loss is not None  # metadata.yaml counts what the file held
+    assert (bag.loss.recorded, bag.loss.lost) == (200, 200 - read)
 
 
 # --------------------------------------------------------------------------- metadata & empty
@@ -311,7 +330,13 @@ def test_lost_data_names_the_losses_but_not_a_cut_last_file(tmp_path: Path) -> N
     middle.write_bytes(b"")
     bag = Bag(path, warn=False)
     assert len(read_x(bag)) == 100
-    assert [(p.kind, p.file) for p in bag.lost_data()] == [("not_mcap", middle)]
+    # and the count: metadata.yaml lists the file's 50 messages, none readable
+    assert [(p.kind, p.file) for p in bag.lost_data()] == [
+        ("not_mcap", middle),
+        ("lost_messages", None),
+    ]
+    assert bag.loss is not None
+    assert (bag.loss.recorded, bag.loss.lost, bag.loss.exact) == (150, 50, True)
     middle.unlink()
     bag = Bag(path, warn=False)
     (lost,) = bag.lost_data()

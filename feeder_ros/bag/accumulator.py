@@ -1,0 +1,387 @@
+"""Per-feeder accumulation for :mod:`feeder_ros.bag.analysis`: the drive timeline (change points of
+the drive setting) and per-segment sums of the metric samples, reduced as the bag streams by.
+
+Metric samples wait in a small pending buffer until the drive timeline has passed their time, then
+are reduced into per-segment sums (``np.bincount``); only change points and per-segment sums are
+kept. A sensor transit (a part's rising edges at two sensors) counts only when its whole passage,
+entry at the first sensor to arrival at the second, lies within one segment: one that entered
+under the previous setting or during its ramp (the ramp's many short segments) would mix two speeds
+(``Segment.transits_left_out`` counts those).
+"""
+
+from __future__ import annotations
+
+import math
+from typing import Any
+
+import numpy as np
+import numpy.typing as npt
+
+from feeder_ros.bag.feeders import (
+    CARRIER_STATE,
+    CARRIER_STATE_BATCH,
+    DRIVE_COMMAND,
+    PART_EXIT,
+    PART_SENSOR_EVENT,
+    PART_STATE_ARRAY,
+    VEHICLE_ESTIMATE,
+)
+from feeder_ros.bag.reader import LOG_TIME, ColumnBatch
+from feeder_ros.bag.results import Segment
+
+__all__ = ["MAX_SAMPLE_PERIOD_S", "METRICS", "PENDING_LIMIT", "Accumulator", "Timeline", "segments"]
+
+#: the longest CarrierStateBatch sample period taken (the vehicle estimator node's limit) [s]
+MAX_SAMPLE_PERIOD_S = 1.0
+# per-segment sums and counts of: estimator mean speed and slip (status OK only), ground-truth
+# velocity and slip flag per part on the track, sensor transit speeds, exits (value 1 each)
+METRICS = ("est_speed", "est_slip", "gt_speed", "gt_slip", "sensor_speed", "exits")
+#: metric samples held before a forced flush
+PENDING_LIMIT = 2_000_000
+_COMMAND_MARGIN_NS = 2_000_000_000  # command-only bags: commands may be stamped this much late
+
+Setting = tuple[float, float]  # (frequency_hz, amplitude_n); (0, 0) is "off"
+#: pending samples: times, values, and when each one's span began (None: at the sample)
+Samples = tuple[npt.NDArray[np.int64], npt.NDArray[np.float64], npt.NDArray[np.int64] | None]
+
+
+def stamps(batch: ColumnBatch) -> npt.NDArray[np.int64]:
+    t = batch["header.stamp.sec"].astype(np.int64) * 1_000_000_000 + batch[
+        "header.stamp.nanosec"
+    ].astype(np.int64)
+    log = batch[LOG_TIME].astype(np.int64)
+    return np.where(t == 0, log, t)
+
+
+class Timeline:
+    """Change points of the drive setting, appended in time order."""
+
+    def __init__(self) -> None:
+        self.times: list[int] = []
+        self.settings: list[Setting] = []
+        self.last_t: int | None = None
+        #: samples left out because they are stamped before what the timeline already holds
+        self.dropped = 0
+        self.dropped_last_t = 0  # the timeline's end when the last of them was dropped
+
+    def add(
+        self,
+        t: npt.NDArray[np.int64],
+        freq: npt.NDArray[np.float64],
+        amp: npt.NDArray[np.float64],
+    ) -> None:
+        if len(t) == 0:
+            return
+        order = np.argsort(t, kind="stable")
+        t, freq, amp = t[order], freq[order], amp[order]
+        if self.last_t is not None:  # drop samples older than what the timeline already holds
+            keep = t >= self.last_t
+            if not keep.all():
+                self.dropped += int(np.count_nonzero(~keep))
+                self.dropped_last_t = self.last_t
+            t, freq, amp = t[keep], freq[keep], amp[keep]
+            if len(t) == 0:
+                return
+        off = ~(amp != 0.0) | ~np.isfinite(amp) | ~np.isfinite(freq)
+        freq = np.where(off, 0.0, np.round(freq, 9))
+        amp = np.where(off, 0.0, np.round(amp, 9))
+        changed = np.empty(len(t), dtype=bool)
+        changed[1:] = (freq[1:] != freq[:-1]) | (amp[1:] != amp[:-1])
+        if self.settings:
+            changed[0] = (float(freq[0]), float(amp[0])) != self.settings[-1]
+        else:
+            changed[0] = True
+        for k in np.flatnonzero(changed):
+            self.times.append(int(t[k]))
+            self.settings.append((float(freq[k]), float(amp[k])))
+        self.last_t = int(t[-1])
+
+
+class Accumulator:
+    """Per-segment sums of metric samples; samples wait until the drive timeline passed them."""
+
+    def __init__(self) -> None:
+        self.state = Timeline()
+        self.command = Timeline()
+        #: per metric: batches of samples (``Samples``); a sensor transit spans from its entry
+        self.pending: dict[str, list[Samples]] = {m: [] for m in METRICS}
+        self.pending_count = 0
+        self.sums: dict[str, npt.NDArray[np.float64]] = {m: np.zeros(0) for m in METRICS}
+        self.counts: dict[str, npt.NDArray[np.float64]] = {m: np.zeros(0) for m in METRICS}
+        #: per segment: samples left out because their span began in an earlier segment
+        self.straddling: dict[str, npt.NDArray[np.float64]] = {m: np.zeros(0) for m in METRICS}
+        self.t_min: int | None = None
+        self.t_max: int | None = None
+        self.last_edge: dict[int, tuple[int, float, int]] = {}  # part -> (sensor, position, t)
+        #: values left out, by reason: (count, an example) for the problems list
+        self.left_out: dict[str, tuple[int, str]] = {}
+
+    def leave_out(self, reason: str, count: int, example: str) -> None:
+        if count:
+            seen, first = self.left_out.get(reason, (0, example))
+            self.left_out[reason] = (seen + count, first)
+
+    def notes(self, start: int | None) -> list[str]:
+        """The problems found in the values: what was left out and why."""
+        out = [
+            f"[bad_value] {count} {reason} (for example {example})"
+            for reason, (count, example) in self.left_out.items()
+        ]
+        for name, line in (("carrier state", self.state), ("drive command", self.command)):
+            if line.dropped:
+                at = (line.dropped_last_t - start) * 1e-9 if start is not None else math.nan
+                out.append(
+                    f"[out_of_order] {line.dropped} {name} sample(s) stamped before the ones "
+                    f"already read (up to t = {at:.6g} s) left out: header stamps out of "
+                    "order; one far ahead (or sim time mixed with wall time) hides the drive "
+                    "changes after it"
+                )
+        return out
+
+    @property
+    def timeline(self) -> Timeline:
+        return self.state if self.state.times else self.command
+
+    def see(self, t: npt.NDArray[np.int64]) -> None:
+        if len(t):
+            lo, hi = int(t.min()), int(t.max())
+            self.t_min = lo if self.t_min is None else min(self.t_min, lo)
+            self.t_max = hi if self.t_max is None else max(self.t_max, hi)
+
+    def add(
+        self,
+        metric: str,
+        t: npt.NDArray[np.int64],
+        v: npt.NDArray[Any],
+        since: npt.NDArray[np.int64] | None = None,
+    ) -> None:
+        """Samples of ``metric`` at times ``t``; ``since``: when each one's span began (a sensor
+        transit's entry): it counts only in a segment that holds its whole span."""
+        if len(t):
+            self.pending[metric].append((t, np.asarray(v, dtype=np.float64), since))
+            self.pending_count += len(t)
+
+    def flush(self, final: bool = False) -> None:
+        """Reduce the pending samples the drive timeline has passed (called between chunks: every
+        drive sample of the chunks read so far is in the timeline); all of them when ``final``."""
+        if final or self.pending_count > PENDING_LIMIT:
+            cutoff = None
+        elif self.state.last_t is not None:
+            cutoff = self.state.last_t
+        elif self.t_max is not None:
+            cutoff = self.t_max - _COMMAND_MARGIN_NS
+        else:
+            return
+        times = np.asarray(self.timeline.times, dtype=np.int64)
+        self.pending_count = 0
+        for metric, parts in self.pending.items():
+            if not parts:
+                continue
+            t = np.concatenate([p[0] for p in parts])
+            v = np.concatenate([p[1] for p in parts])
+            spans = [p[2] for p in parts if p[2] is not None]
+            since = np.concatenate(spans) if len(spans) == len(parts) else None
+            if cutoff is not None:
+                now = t <= cutoff
+                later = ~now
+                if later.any():
+                    rest = None if since is None else since[later]
+                    self.pending[metric] = [(t[later], v[later], rest)]
+                else:
+                    self.pending[metric] = []
+                self.pending_count += int(later.sum())
+                t, v = t[now], v[now]
+                since = None if since is None else since[now]
+            else:
+                self.pending[metric] = []
+            if len(t):
+                self._reduce(metric, times, t, v, since)
+
+    def _reduce(
+        self,
+        metric: str,
+        times: npt.NDArray[np.int64],
+        t: npt.NDArray[np.int64],
+        v: npt.NDArray[np.float64],
+        since: npt.NDArray[np.int64] | None,
+    ) -> None:
+        """Add samples to the sums of their segments (by ``times``, the drive change points); a
+        sample whose span began in an earlier segment to ``straddling`` instead."""
+        seg = np.searchsorted(times, t, side="right")  # segment 0: before the first drive info
+        whole = (
+            np.ones(len(t), dtype=bool)
+            if since is None
+            else np.searchsorted(times, since, side="right") == seg
+        )
+        n = len(times) + 1
+        for target, weights, keep in (
+            (self.sums, v, whole),
+            (self.counts, None, whole),
+            (self.straddling, None, ~whole),
+        ):
+            add = np.bincount(
+                seg[keep], weights=None if weights is None else weights[keep], minlength=n
+            )
+            old = target[metric]
+            if len(old) < n:
+                old = np.concatenate([old, np.zeros(n - len(old))])
+            old[: len(add)] += add
+            target[metric] = old
+
+    # -- per type -------------------------------------------------------------------------------
+
+    def batch(self, batch: ColumnBatch) -> None:
+        t = stamps(batch)
+        self.see(t)
+        kind = batch.type
+        if kind == CARRIER_STATE:
+            self._count_drive(batch["drive_frequency_hz"], batch["drive_amplitude_n"])
+            self.state.add(t, batch["drive_frequency_hz"], batch["drive_amplitude_n"])
+        elif kind == CARRIER_STATE_BATCH:
+            self._state_batch(t, batch)
+        elif kind == DRIVE_COMMAND:
+            amp = np.where(batch["enabled"].astype(bool), batch["amplitude_n"], 0.0)
+            self._count_drive(batch["frequency_hz"], amp)
+            self.command.add(t, batch["frequency_hz"], amp)
+        elif kind == VEHICLE_ESTIMATE:
+            ok = batch["status"] == 0
+            for metric, name in (("est_speed", "mean_speed_mps"), ("est_slip", "slip_fraction")):
+                values = batch[name]
+                good = ok & np.isfinite(values)
+                self._count_bad(f"non-finite VehicleEstimate.{name} left out", ok & ~good, values)
+                self.add(metric, t[good], values[good])
+        elif kind == PART_STATE_ARRAY:
+            per_part = np.repeat(t, batch["parts._count"].astype(np.int64))
+            on = batch["parts.on_track"].astype(bool)
+            velocity = batch["parts.velocity_mps"]
+            good = on & np.isfinite(velocity)
+            self._count_bad("non-finite PartState.velocity_mps left out", on & ~good, velocity)
+            self.add("gt_speed", per_part[good], velocity[good])
+            self.add("gt_slip", per_part[on], (batch["parts.phase"][on] != 0).astype(np.float64))
+        elif kind == PART_SENSOR_EVENT:
+            self._sensor_events(t, batch)
+        elif kind == PART_EXIT:
+            self.add("exits", t, np.ones(len(t)))
+
+    def _count_drive(self, freq: npt.NDArray[Any], amp: npt.NDArray[Any]) -> None:
+        """Non-finite drive settings count as "off" (see ``_Timeline.add``): say so."""
+        self._count_bad("non-finite drive amplitude(s) taken as off", ~np.isfinite(amp), amp)
+        driven = np.isfinite(amp) & (amp != 0.0)
+        self._count_bad(
+            "non-finite drive frequency(ies) taken as off", driven & ~np.isfinite(freq), freq
+        )
+
+    def _count_bad(self, reason: str, bad: npt.NDArray[np.bool_], values: npt.NDArray[Any]) -> None:
+        count = int(np.count_nonzero(bad))
+        if count:
+            self.leave_out(reason, count, repr(float(values[np.argmax(bad)])))
+
+    def _state_batch(self, t: npt.NDArray[np.int64], batch: ColumnBatch) -> None:
+        freq_cols, amp_cols = batch["drive_frequency_hz"], batch["drive_amplitude_n"]
+        periods = np.asarray(batch["sample_period_s"], dtype=np.float64)
+        # the estimator's limit: a period must be > 0 and at most 1 s (NaN, inf, ns sent as s...)
+        bad = ~((periods > 0.0) & (periods <= MAX_SAMPLE_PERIOD_S))
+        self._count_bad(
+            "CarrierStateBatch message(s) with an impossible sample_period_s left out",
+            bad,
+            periods,
+        )
+        stamps, freqs, amps = [], [], []
+        for k in np.flatnonzero(~bad).tolist():
+            freq = np.asarray(freq_cols[k], dtype=np.float64)
+            amp = np.asarray(amp_cols[k], dtype=np.float64)
+            m = min(len(freq), len(amp))
+            stamps.append(t[k] + np.round(np.arange(m) * float(periods[k]) * 1e9).astype(np.int64))
+            freqs.append(freq[:m])
+            amps.append(amp[:m])
+        if stamps:
+            all_t = np.concatenate(stamps)
+            self.see(all_t)
+            all_freq, all_amp = np.concatenate(freqs), np.concatenate(amps)
+            self._count_drive(all_freq, all_amp)
+            self.state.add(all_t, all_freq, all_amp)
+
+    def _sensor_events(self, t: npt.NDArray[np.int64], batch: ColumnBatch) -> None:
+        rising = batch["present"].astype(bool)
+        order = np.argsort(t, kind="stable")
+        out_t: list[int] = []
+        out_v: list[float] = []
+        out_since: list[int] = []  # the entry at the first sensor
+        sensors, positions, parts = (
+            batch["sensor_index"],
+            batch["sensor_position_m"],
+            batch["part_id"],
+        )
+        for k in order:
+            part = int(parts[k])
+            if not rising[k] or part == 0:
+                continue
+            sensor, position, when = int(sensors[k]), float(positions[k]), int(t[k])
+            previous = self.last_edge.get(part)
+            self.last_edge[part] = (sensor, position, when)
+            if previous is None or previous[0] == sensor or when <= previous[2]:
+                continue
+            distance = position - previous[1]
+            if distance != 0.0 and math.isfinite(distance):
+                out_t.append(when)
+                out_v.append(distance / ((when - previous[2]) * 1e-9))
+                out_since.append(previous[2])
+        self.add(
+            "sensor_speed",
+            np.asarray(out_t, dtype=np.int64),
+            np.asarray(out_v),
+            np.asarray(out_since, dtype=np.int64),
+        )
+
+
+# ------------------------------------------------------------------------------- results
+
+
+def _mean(acc: Accumulator, metric: str, i: int) -> float:
+    counts = acc.counts[metric]
+    if i >= len(counts) or counts[i] == 0:
+        return math.nan
+    return float(acc.sums[metric][i] / counts[i])
+
+
+def _count(acc: Accumulator, metric: str, i: int) -> int:
+    counts = acc.counts[metric]
+    return int(counts[i]) if i < len(counts) else 0
+
+
+def _straddling(acc: Accumulator, metric: str, i: int) -> int:
+    left = acc.straddling[metric]
+    return int(left[i]) if i < len(left) else 0
+
+
+def segments(acc: Accumulator, start: int, end: int, min_segment_s: float) -> list[Segment]:
+    timeline = acc.timeline
+    bounds = [start, *timeline.times, end]
+    settings: list[Setting | None] = [None, *timeline.settings]
+    out: list[Segment] = []
+    for i, setting in enumerate(settings):
+        lo, hi = bounds[i], bounds[i + 1]
+        has_data = any(_count(acc, m, i) for m in METRICS)
+        if i == 0 and (hi <= lo or not has_data):
+            continue  # nothing before the first drive information
+        duration = (hi - lo) * 1e-9
+        exited = _count(acc, "exits", i)
+        segment = Segment(
+            index=len(out),
+            start_s=(lo - start) * 1e-9,
+            end_s=(hi - start) * 1e-9,
+            frequency_hz=None if setting is None else setting[0],
+            amplitude_n=None if setting is None else setting[1],
+            speed_estimate_mps=_mean(acc, "est_speed", i),
+            slip_estimate=_mean(acc, "est_slip", i),
+            speed_ground_truth_mps=_mean(acc, "gt_speed", i),
+            slip_ground_truth=_mean(acc, "gt_slip", i),
+            speed_sensors_mps=_mean(acc, "sensor_speed", i),
+            transits=_count(acc, "sensor_speed", i),
+            transits_left_out=_straddling(acc, "sensor_speed", i),
+            parts_exited=exited,
+            feed_rate_per_min=exited / (duration / 60.0) if duration > 0 else math.nan,
+            transient=duration < min_segment_s,
+        )
+        out.append(segment)
+    return out
