@@ -96,6 +96,11 @@ def add_arguments(parser: argparse.ArgumentParser) -> None:
     parser.add_argument(
         "--plan", type=Path, metavar="YAML", help=f"sweep plan and fit settings ({PLAN_NAME})"
     )
+    parser.add_argument(
+        "--namespace",
+        metavar="NS",
+        help="--source bag: the feeder (e.g. /feeder_a) of bags that hold several",
+    )
     group = parser.add_argument_group("plan overrides")
     group.add_argument(
         "--frequencies",
@@ -354,6 +359,7 @@ def _sweep_bag(args: argparse.Namespace, plan: SweepPlan, show: bool) -> tuple[S
             full_scale_force_n=plan.full_scale_force_n,
             part_masses_kg=masses,
             min_duration_s=plan.window_s if plan.window_s is not None else 0.5,
+            namespace=args.namespace,
             progress=report,
         )
     except BagError as error:

@@ -98,14 +98,16 @@ def sweep_from_bags(
     part_masses_kg: Sequence[float],
     min_duration_s: float = 0.5,
     min_segment_s: float = 0.5,
+    namespace: str | None = None,
     progress: Progress | None = None,
 ) -> BagSweep:
     """Sweep points from recorded bags (see the module docstring).
 
     ``part_masses_kg``: one mass for every bag, or one per bag. ``min_segment_s`` is the analysis'
     transient limit (ramp steps are shorter); ``min_duration_s`` the shortest segment that counts
-    as a measurement. Raises :class:`SweepDataError` (or the bag reader's ``BagError``) when a bag
-    cannot be analysed or holds no driven segment."""
+    as a measurement; ``namespace`` picks the feeder of bags that hold several. Raises
+    :class:`SweepDataError` (or the bag reader's ``BagError``) when a bag cannot be analysed or
+    holds no driven segment."""
     if not paths:
         raise SweepDataError("no bags given")
     if not (math.isfinite(full_scale_force_n) and full_scale_force_n > 0.0):
@@ -122,7 +124,9 @@ def sweep_from_bags(
     analyses: list[BagAnalysis] = []
     for k, (path, mass) in enumerate(zip(paths, masses, strict=True)):
         report = None if progress is None else (lambda f, k=k: progress(k, f))
-        analysis = analyze_bag(path, min_segment_s=min_segment_s, progress=report)
+        analysis = analyze_bag(
+            path, min_segment_s=min_segment_s, namespace=namespace, progress=report
+        )
         found = [
             p
             for p in (

@@ -72,6 +72,7 @@ from feeder_ros.nodes.drive_interface_parameters import (
 from feeder_ros.nodes.drive_speed_feedback import SpeedFeedback
 from feeder_ros.nodes.ros_parameters import declare_parameters, validator
 from feeder_ros.nodes.runner import run_node
+from feeder_ros.nodes.stall_detector import StallDetector
 from feeder_ros.physics.parameters import FeederParameters
 from feeder_ros.physics.simulation import limited_threads
 from feeder_ros.srv import SetDrive, SetTargetSpeed
@@ -219,6 +220,8 @@ class DriveInterface(LifecycleNode):
         self._feedback_sub: Any = None
         self._sim_sub: Any = None  # sim backend: the simulator's parts/state (a sign of life)
         self._sim_heard: float | None = None  # time.monotonic() of its last message
+        self._sim_stalls: StallDetector | None = None
+        self._sim_listening = 0.0  # time.monotonic() since this node listens (after a stall)
         self._tracking_note = "not configured"  # why tracking is not active
         self._tracking_refused: tuple[float, float, float] | None = None  # start point refused
         self._tracking_mode = TrackerMode.OFF  # as last logged
@@ -309,6 +312,12 @@ class DriveInterface(LifecycleNode):
         if values["backend"] == "sim":
             self._command_pub = self.create_publisher(DriveCommand, "drive/command", RELIABLE)
             self._sim_heard = None
+            # this node's own stall (a loaded machine, a composed cell's busy thread) is not the
+            # simulator's silence: silence counts from the end of the catch-up after it
+            self._sim_stalls = StallDetector(
+                1.0 / values["publish_rate_hz"], start_s=time.monotonic()
+            )
+            self._sim_listening = time.monotonic()
             self._sim_sub = self.create_subscription(
                 PartStateArray, "parts/state", self._on_sim_parts, SIM_FEEDBACK_QOS
             )
@@ -474,7 +483,9 @@ class DriveInterface(LifecycleNode):
 
     def _sim_feedback_age(self) -> float | None:
         heard = self._sim_heard
-        return None if heard is None else time.monotonic() - heard
+        if heard is None:
+            return None
+        return time.monotonic() - max(heard, self._sim_listening)
 
     def _publish_command(self, output: DriveOutput) -> None:
         if self._command_pub is None or not self.context.ok():
@@ -494,6 +505,8 @@ class DriveInterface(LifecycleNode):
         if controller is None or backend is None:
             return
         now = self._now()
+        if self._sim_stalls is not None and self._sim_stalls.resuming(time.monotonic()):
+            self._sim_listening = time.monotonic()  # (called here only: once per loop tick)
         status = backend.status()
         if status.fault != self._backend_fault:
             was_faulted = bool(self._backend_fault)

@@ -166,3 +166,21 @@ def test_a_bag_without_driven_segments_is_refused(tmp_path: Path) -> None:
             writer.write(f"{NS}/carrier/state", bytes(serialize_message(message)), T0 + k * 10 * MS)
     with pytest.raises(SweepDataError, match="no driven segment"):
         sweep_from_bags([bag], full_scale_force_n=100.0, part_masses_kg=[0.03])
+
+
+def test_a_bag_of_two_feeders_is_refused_unless_a_namespace_picks_one(tmp_path: Path) -> None:
+    from bag.test_feeders import FEEDERS, write_two_feeders
+
+    from feeder_ros.bag.errors import BagError
+
+    path = tmp_path / "two"
+    write_two_feeders(path)
+    with pytest.raises(BagError, match=r"/feeder_a.*/feeder_b"):
+        sweep_from_bags([path], full_scale_force_n=100.0, part_masses_kg=[0.01])
+    swept = sweep_from_bags(
+        [path], full_scale_force_n=100.0, part_masses_kg=[0.01], namespace="/feeder_b"
+    )
+    frequencies = sorted({p.frequency_hz for p in swept.result.points})
+    assert frequencies == [40.0]
+    speeds = [p.speed_mps for p in swept.result.points]
+    assert speeds == pytest.approx([FEEDERS["/feeder_b"]["speed"]] * len(speeds), rel=0.02)

@@ -1,10 +1,10 @@
 """A simulator that cannot keep up with the wall clock says so and still obeys its commander.
 
 Paced by the wall clock and given more work than it can do in real time (a 20 kHz accelerometer
-published message by message, 10,000 parts' states at 1 kHz), it falls behind: a drive command stamped by the commander's
-(wall) clock is then ahead of the simulation clock only because of the simulator's own lag. It
-must be applied at once, not dropped as "from the future", and the lag must be an ERROR with the
-achieved real-time factor, not a quiet WARN.
+published message by message, 10,000 parts' states at 1 kHz), it falls behind: a drive command
+stamped by the commander's (wall) clock is then ahead of the simulation clock only because of the
+simulator's own lag. It must be applied at once, not dropped as "from the future", and the lag
+must be an ERROR with the achieved real-time factor, not a quiet WARN.
 """
 
 from __future__ import annotations
