@@ -397,6 +397,7 @@ def main(argv: list[str] | None = None) -> int:
         + (["--composed"] if args.composed else [])
     )
     timeline_file = args.output / "controller_timeline.json"
+    timeline_file.unlink(missing_ok=True)  # an earlier run's must not pass for this one's
     controller_code: int | None = None  # None: not started (the cell did not come up)
     missing: list[str] = []
     try:

@@ -96,11 +96,7 @@ def add_arguments(parser: argparse.ArgumentParser) -> None:
     parser.add_argument(
         "--plan", type=Path, metavar="YAML", help=f"sweep plan and fit settings ({PLAN_NAME})"
     )
-    parser.add_argument(
-        "--namespace",
-        metavar="NS",
-        help="--source bag: the feeder (e.g. /feeder_a) of bags that hold several",
-    )
+
     group = parser.add_argument_group("plan overrides")
     group.add_argument(
         "--frequencies",
@@ -147,7 +143,12 @@ def add_arguments(parser: argparse.ArgumentParser) -> None:
     sim = parser.add_argument_group("--source sim: the plant")
     add_plant_arguments(sim, SIM_PRESET)
     live = parser.add_argument_group("--source live: the cell")
-    live.add_argument("--namespace", default="", help="the feeder's namespace, e.g. /cell/feeder_1")
+    live.add_argument(
+        "--namespace",
+        default="",
+        help="the feeder's namespace, e.g. /cell/feeder_1 (--source bag too: the feeder of bags "
+        "that hold several)",
+    )
     live.add_argument(
         "--measure",
         choices=MEASURES,
@@ -308,7 +309,7 @@ def _sweep_live(args: argparse.Namespace, plan: SweepPlan, show: bool) -> SweepR
     try:
         return run_live_sweep(
             plan,
-            namespace=args.namespace,
+            namespace=args.namespace or None,
             measure=args.measure or "sensors",
             manage_lifecycle=not args.no_lifecycle,
             progress=lambda done, total: bar.update(done),
@@ -359,7 +360,7 @@ def _sweep_bag(args: argparse.Namespace, plan: SweepPlan, show: bool) -> tuple[S
             full_scale_force_n=plan.full_scale_force_n,
             part_masses_kg=masses,
             min_duration_s=plan.window_s if plan.window_s is not None else 0.5,
-            namespace=args.namespace,
+            namespace=args.namespace or None,
             progress=report,
         )
     except BagError as error:
