@@ -309,7 +309,7 @@ def _sweep_live(args: argparse.Namespace, plan: SweepPlan, show: bool) -> SweepR
     try:
         return run_live_sweep(
             plan,
-            namespace=args.namespace or None,
+            namespace=args.namespace,
             measure=args.measure or "sensors",
             manage_lifecycle=not args.no_lifecycle,
             progress=lambda done, total: bar.update(done),
