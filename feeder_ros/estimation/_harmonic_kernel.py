@@ -16,7 +16,7 @@ import numpy as np
 from numba import njit
 
 
-@njit(cache=True)
+@njit(cache=True, nogil=True)  # other threads of the node run meanwhile
 def harmonic_lsq(theta, a, K, beta, stats):
     """Fit ``beta[0] + sum_k beta[k]*cos(k*theta) + beta[K+k]*sin(k*theta)`` to ``a``.
 

@@ -233,7 +233,8 @@ def _first_relative_zero(v0, a0, c2, c3, us, p, ts, sgn, s, h, roots, pts):
     return math.inf
 
 
-@njit(cache=True)
+# nogil: the calibration's worker thread runs it while the node's executor publishes
+@njit(cache=True, nogil=True)
 def _observe(t, v, a, L, D, state, out_u, out_phase, out_dx, out_slip):
     """Propagate the part over the samples; ``state`` is updated in place. Returns a status:
     0 done, 1 too many events in an interval (the interval was finished without further events)."""

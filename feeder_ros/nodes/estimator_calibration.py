@@ -5,7 +5,9 @@ Sensor transits (``parts/sensor_events``) and an operator's measured speed
 :class:`~feeder_ros.estimation.online_calibration.MeasurementSource` into the
 :class:`~feeder_ros.estimation.calibration.Calibrator`; every accepted update gives the estimator
 the new part belief, is published (latched) on ``calibration`` and written to
-``calibration.file`` (atomically). ``calibration/reset`` returns to the nominal part. A calibration
+``calibration.file`` (atomically). Transits are folded in by a worker thread, in their order: an
+update takes 30 ms to a few hundred (more on a loaded machine), and the node's lock stays free for
+the estimates meanwhile. ``calibration/reset`` returns to the nominal part. A calibration
 file that cannot be used at start (corrupt, foreign, another version) is reported (ERROR log,
 WARN in ``/diagnostics``) and the node runs on the nominal part.
 """
@@ -13,6 +15,7 @@ WARN in ``/diagnostics``) and the node runs on the nominal part.
 from __future__ import annotations
 
 import math
+import queue
 import threading
 from collections.abc import Callable
 from typing import Any
@@ -191,9 +194,16 @@ class EstimatorCalibration:
         self._file_problem = ""
         self._refused = 0
         self._message = "nominal part (no measurement yet)"
+        # the calibrator is the worker's while it folds a measurement in: this lock guards it; the
+        # node's lock (always taken first) only to hand the estimator a belief
+        self._cal_lock = threading.Lock()
+        self._count_lock = threading.Lock()  # the refusal count and message (any thread)
         self._calibrator = self._start(nominal)
+        self._queue: queue.SimpleQueue[tuple[int, SpeedMeasurement]] = queue.SimpleQueue()
+        self._generation = 0  # a reset or a new nominal part drops the queued measurements
         self._publisher = node.create_publisher(PartCalibration, "calibration", LATCHED_QOS)
         if self._enabled:
+            threading.Thread(target=self._work, name="part-calibration", daemon=True).start()
             node.create_subscription(
                 PartSensorEvent, "parts/sensor_events", self._on_sensor_event, EVENT_QOS
             )
@@ -228,15 +238,17 @@ class EstimatorCalibration:
 
     def renominate(self, nominal: PartModel) -> None:
         """The nominal part changed (a parameter): the calibration of the old one is void."""
-        self._calibrator = Calibrator(
-            PartBelief.prior(
-                nominal,
-                self._values["calibration.friction_uncertainty"],
-                self._values["calibration.gain_uncertainty"],
+        with self._cal_lock:
+            self._generation += 1
+            self._calibrator = Calibrator(
+                PartBelief.prior(
+                    nominal,
+                    self._values["calibration.friction_uncertainty"],
+                    self._values["calibration.gain_uncertainty"],
+                )
             )
-        )
-        self._message = "nominal part changed: calibration restarted"
-        self._publish()
+            self._message = "nominal part changed: calibration restarted"
+            self._publish()
 
     # -- inputs ----------------------------------------------------------------------------------
     def _on_sensor_event(self, message: PartSensorEvent) -> None:
@@ -248,10 +260,11 @@ class EstimatorCalibration:
                 estimator, stamp, message.sensor_index, message.sensor_position_m, part,
                 message.present,
             )  # fmt: skip
-            if isinstance(outcome, SpeedMeasurement):
-                self._fold_in(outcome)
-            elif outcome:
-                self._refuse(outcome)
+        if isinstance(outcome, SpeedMeasurement):
+            # folded in by the worker, off the executor's thread
+            self._queue.put((self._generation, outcome))
+        elif outcome:
+            self._refuse(outcome)  # (without the calibration lock: an update may be running)
 
     def _on_measured_speed(
         self, request: SetMeasuredSpeed.Request, response: SetMeasuredSpeed.Response
@@ -260,21 +273,22 @@ class EstimatorCalibration:
             outcome = self._source.operator_speed(
                 self._estimator(), request.speed_mps, request.uncertainty_mps
             )
-            result = self._fold_in(outcome) if isinstance(outcome, SpeedMeasurement) else None
-            if result is None:
-                self._refuse(str(outcome))
-                response.accepted, response.reason = False, str(outcome)
-            else:
-                response.accepted, response.reason = result.accepted, result.reason
-                response.predicted_speed_mps = result.predicted_mps
-                response.predicted_uncertainty_mps = result.predicted_uncertainty_mps
-            belief = self._calibrator.belief
-            response.static_friction = belief.static_friction
-            response.kinetic_friction = belief.kinetic_friction
+        if not isinstance(outcome, SpeedMeasurement):
+            self._refuse(str(outcome))
+            response.accepted, response.reason = False, str(outcome)
+        else:
+            result = self._fold_in(self._generation, outcome)
+            response.accepted, response.reason = result.accepted, result.reason
+            response.predicted_speed_mps = result.predicted_mps
+            response.predicted_uncertainty_mps = result.predicted_uncertainty_mps
+        belief = self._calibrator.belief
+        response.static_friction = belief.static_friction
+        response.kinetic_friction = belief.kinetic_friction
         return response
 
     def _on_reset(self, request: Trigger.Request, response: Trigger.Response) -> Trigger.Response:
-        with self._lock:
+        with self._lock, self._cal_lock:  # (the locks' order everywhere: the node's first)
+            self._generation += 1  # measurements still queued were for the old calibration
             self._calibrator.restore(
                 PartBelief.prior(
                     self._calibrator.belief.nominal,
@@ -282,30 +296,50 @@ class EstimatorCalibration:
                     self._values["calibration.gain_uncertainty"],
                 )
             )
-            self._refused = 0
-            self._message = "reset to the nominal part"
+            with self._count_lock:
+                self._refused = 0
+                self._message = "reset to the nominal part"
             self._estimator().set_belief(self._calibrator.belief)
             self._persist()
-            self._publish()
+        self._publish()
         response.success, response.message = True, self._message
         return response
 
     # -- updates -----------------------------------------------------------------------------
-    def _fold_in(self, measurement: SpeedMeasurement) -> CalibrationResult:
-        """Caller holds the lock."""
-        result = self._calibrator.add(measurement)
+    def _work(self) -> None:
+        """The worker: folds the queued transits in, one at a time, in their order."""
+        while True:
+            generation, measurement = self._queue.get()
+            try:
+                self._fold_in(generation, measurement)
+            except Exception as error:  # the worker must outlive one bad update
+                self._refuse(f"calibration update failed: {error!r}")
+
+    def _fold_in(self, generation: int, measurement: SpeedMeasurement) -> CalibrationResult:
+        """Fold ``measurement`` in (with the calibration lock: the estimates go on meanwhile),
+        then hand the estimator the new belief (with the node's lock, then the calibration's, as
+        everywhere), unless a reset or a new nominal part came in between."""
+        with self._cal_lock:
+            if generation != self._generation:
+                return CalibrationResult(False, "calibration restarted", self._calibrator.belief)
+            result = self._calibrator.add(measurement)
         if not result.accepted:
             self._refuse(result.reason)
             return result
-        self._message = result.reason
-        self._estimator().set_belief(result.belief)
-        self._persist()
+        with self._lock, self._cal_lock:
+            if generation != self._generation:
+                return result
+            with self._count_lock:
+                self._message = result.reason
+            self._estimator().set_belief(result.belief)
+            self._persist()
         self._publish()
         return result
 
     def _refuse(self, reason: str) -> None:
-        self._refused += 1
-        self._message = f"refused: {reason}"
+        with self._count_lock:
+            self._refused += 1
+            self._message = f"refused: {reason}"
         self._node.get_logger().warning(self._message, throttle_duration_sec=5.0)
         self._publish()
 
