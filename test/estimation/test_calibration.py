@@ -14,7 +14,7 @@ import numpy as np
 import pytest
 
 from feeder_ros.estimation import EstimatorConfig, HarmonicFit, PartModel, VehicleEstimator
-from feeder_ros.estimation.calibration import Calibrator, SpeedMeasurement
+from feeder_ros.estimation.calibration import MAX_POINTS, Calibrator, SpeedMeasurement
 from feeder_ros.estimation.carrier_velocity import select_period_order
 from feeder_ros.estimation.part_belief import CarrierRun, PartBelief, predict_speed
 from feeder_ros.physics.parameters import FeederParameters, ParameterError
@@ -255,3 +255,20 @@ def test_a_restored_belief_is_the_prior_of_what_follows(points: list[Point]) -> 
     assert fresh.belief is stored  # reset returns to the (restored) prior
     run = CarrierRun.of(point.fit, 1e-3, 10, 20)
     assert predict_speed(run, stored).speed_mps == pytest.approx(point.true_mps, rel=0.01)
+
+
+def test_only_the_most_recently_measured_points_are_kept(points: list[Point]) -> None:
+    """A speed trim makes a new operating point at every step: the calibration keeps the
+    MAX_POINTS measured last (its cost stays bounded), the belief lists exactly those."""
+    calibrator = Calibrator(PartBelief.prior(NOMINAL))
+    point = points[1]
+    drives = [(point.drive[0], point.drive[1] * (1.0 + 0.001 * k)) for k in range(MAX_POINTS + 3)]
+    for drive in drives:
+        result = calibrator.add(SpeedMeasurement(point.fit, point.true_mps, 1e-4, "transit", drive))
+        assert result.accepted, result.reason
+    # measured again: the first point becomes the most recent and stays
+    again = calibrator.add(SpeedMeasurement(point.fit, point.true_mps, 1e-4, "transit", drives[5]))
+    assert again.accepted, again.reason
+    order = [*drives[3:5], *drives[6:], drives[5]]  # 0-2 evicted; 5 measured last
+    assert list(calibrator.belief.points) == [(round(f, 6), round(a, 6)) for f, a in order]
+    assert calibrator.belief.transits == MAX_POINTS + 4
