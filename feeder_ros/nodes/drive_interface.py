@@ -18,6 +18,10 @@ seeking) while trimming the amplitude to hold the target speed, from the part sp
 Its set points go through the same limits and ramps as any other (:meth:`DriveController.set_drive`,
 with target-speed mode kept). Stale feedback holds the tracked centre frequency and amplitude and
 is reported in ``/diagnostics`` (WARN) and ``drive/state`` (``status`` = TRACKING_HOLD).
+
+Length: about 900 lines, the shell of four roles (lifecycle, services, resonance tracking, the two
+backends and their health); moving the tracker's coordination and the diagnostic levels into the
+ROS-free core is issue 30's work, which shrinks it below 800.
 """
 
 from __future__ import annotations

@@ -142,7 +142,8 @@ INTERFACE = NodeInterface(
             "parts/state",
             "feeder_ros/msg/PartStateArray",
             "reliable, depth 1000",
-            "every part's position, velocity and phase (ground truth)",
+            "the position, velocity and phase of each part on the track (ground truth); a part "
+            "that left is listed once more, with on_track false",
         ),
         TopicSpec(
             "parts/sensor_events",
@@ -315,6 +316,7 @@ class PlatformSimulator(Node):
         self._state_index = 1
         self._parts_index = 1
         self._parts_out = 0
+        self._exit_listed = np.zeros(count, bool)  # exited parts already sent once on parts/state
         self._last_feed_s = 0.0
         self._epoch_ns = 0 if self._sim_clock else self.get_clock().now().nanoseconds
         self._command_deadline_s = math.inf
@@ -686,10 +688,21 @@ class PlatformSimulator(Node):
         message.header.stamp = self._stamp(t)
         message.header.frame_id = "track"
         carrier_v = float(result.carrier_v_mps[row])
-        for i in range(result.part_x_m.shape[1]):
-            phase = int(result.part_phase[row, i])
+        phases = result.part_phase[row]
+        exited = phases == Phase.EXITED
+        # the parts on the track, and each exited part once (on_track false): the message stays
+        # the size of the track's load however many parts have passed (listing every part ever
+        # fed grew it by a part per feed interval, and its cost with it, in every subscriber)
+        if self._exit_listed.size < phases.size:
+            self._exit_listed = np.concatenate(
+                (self._exit_listed, np.zeros(phases.size - self._exit_listed.size, bool))
+            )
+        listed = np.flatnonzero(~exited | ~self._exit_listed[: phases.size])
+        self._exit_listed[: phases.size] |= exited
+        for i in listed.tolist():
+            phase = int(phases[i])
             part = PartState()
-            part.part_id = i
+            part.part_id = int(i)
             part.on_track = phase != Phase.EXITED
             if part.on_track:
                 part.position_m = float(track[i])

@@ -221,3 +221,31 @@ def test_a_paced_factor_above_max_step_over_tick_is_reached() -> None:
         simulated = (Time.from_msg(clocks[-1].clock).nanoseconds - sim_start) * 1e-9
         assert 8.0 < simulated / wall < 12.0, f"{simulated / wall:.2f}x real time, asked 10x"
     assert process.returncode == 0
+
+
+def test_a_part_that_left_is_listed_once_more_then_no_longer() -> None:
+    """parts/state carries the parts on the track and each exited part once (on_track false):
+    the message does not grow with every part ever fed."""
+    ns = "/sim_exits"
+    command = [
+        SIMULATOR, "--ros-args", "-r", f"__ns:={ns}", "-p", "track_length_m:=0.02",
+        "-p", "initial_parts:=3", "-p", "part_start_m:=0.017", "-p", "part_spacing_m:=0.001",
+        "-p", "damping_ns_per_m:=200.0",
+    ]  # fmt: skip
+    with running(command), probe_node() as node:
+        parts: list[PartStateArray] = []
+        node.create_subscription(PartStateArray, f"{ns}/parts/state", parts.append, RELIABLE)
+        publisher = node.create_publisher(DriveCommand, f"{ns}/drive/command", 10)
+
+        def drive_until_empty() -> bool:
+            message = DriveCommand(enabled=True, frequency_hz=30.0, amplitude_n=40.0)
+            message.header.stamp = node.get_clock().now().to_msg()
+            publisher.publish(message)
+            return len(parts) > 10 and all(len(m.parts) == 0 for m in parts[-5:])
+
+        assert wait_until(drive_until_empty, 30.0), parts[-1] if parts else None
+        left = [(m, p) for m in parts for p in m.parts if not p.on_track]
+        assert sorted(p.part_id for _, p in left) == [0, 1, 2]  # each exited part once
+        for message, part in left:
+            later = parts[parts.index(message) + 1 :]
+            assert all(part.part_id not in {q.part_id for q in m.parts} for m in later)
