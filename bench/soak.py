@@ -7,6 +7,8 @@ the wire: IMU and carrier-state samples missing from their grids; diagnostics ER
     python bench/soak.py --minutes 3 --json out.json
 
 Targets (issue 33): RSS and CPU growth < 5 % from start to end, 0 missing samples, 0 ERRORs.
+``cpu_per_minute`` gives each node's CPU over every minute of the run (with the speed of that
+minute), to tell a trend from the bursts of the estimator's calibration work.
 """
 
 from __future__ import annotations
@@ -164,8 +166,18 @@ def _soak(
     start = _window(pids, 30.0)
     began = time.monotonic()
     change = 1
+    series: list[dict[str, Any]] = []  # CPU per node over each speed's minute
     while time.monotonic() - began < minutes * 60.0 - 30.0:
-        time.sleep(min(60.0, max(minutes * 60.0 - 30.0 - (time.monotonic() - began), 0.0)))
+        span = min(60.0, max(minutes * 60.0 - 30.0 - (time.monotonic() - began), 0.0))
+        if span > 1.0:
+            minute = _window(pids, span)
+            series.append(
+                {
+                    "minute": round((time.monotonic() - began) / 60.0, 2),
+                    "speed_mm_s": 1e3 * SPEEDS_MPS[(change - 1) % len(SPEEDS_MPS)],
+                    **{node: round(v["cpu_percent"], 1) for node, v in minute.items()},
+                }
+            )
         controller.target_speed(SPEEDS_MPS[change % len(SPEEDS_MPS)])
         change += 1
     # the end window at the start window's speed (the work per second depends on the setting)
@@ -189,6 +201,7 @@ def _soak(
         "start": start,
         "end": end,
         "growth": growth,
+        "cpu_per_minute": series,
         "imu_samples": imu.received,
         "imu_missing": imu.missing,
         "state_samples": state.received,
