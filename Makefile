@@ -23,7 +23,7 @@ WORK := .work
 STAMPS := $(WORK)/stamps/$(ROS_DISTRO)
 WS := $(WORK)/ws
 
-INTERFACE_SOURCES := CMakeLists.txt package.xml $(wildcard msg/*.msg srv/*.srv) tools/install_interfaces.py
+INTERFACE_SOURCES := CMakeLists.txt package.xml $(wildcard msg/*.msg srv/*.srv action/*.action) tools/install_interfaces.py
 PACKAGE_SOURCES := $(shell find feeder_ros config resource -type f -not -path '*/__pycache__/*' 2>/dev/null)
 LINT_PATHS := $(wildcard feeder_ros test bench tools launch) setup.py
 

@@ -5,7 +5,7 @@
    speed monitor, each a process, in namespace ``/demo_cell/feeder_1``.
 2. The example cell controller (``feeder_ros.examples.cell_controller``) drives it through the
    public interface only: start, target speed, change of speed, a watchdog trip (its heartbeat
-   stops) and the recovery, stop.
+   stops) and the recovery, three parts asked for with the ``feed_parts`` action, stop.
 3. A probe records what the cell published; the demo prints a summary (speeds achieved against
    the targets, by the estimator, by the part-present sensors and in truth; feed rate; diagnostics
    seen) and writes plots and the data to ``--output``.
@@ -237,6 +237,7 @@ def summarise(
         "phases": phases,
         "calibration": calibration,
         "watchdog": watchdog,
+        "feed_parts": next((e for e in timeline if e["step"] == "feed_parts"), {}),
         "parts_fed": len(recording.exits),
         "diagnostics": {
             name: LEVELS[min(level, 3)] for name, level in recording.diagnostics.items()
@@ -265,7 +266,8 @@ def problems(
     controller is then not started: ``controller_code`` None), the controller and the cell exit
     cleanly, the speed monitor judges every target-speed phase OK with an estimate in it and the
     truth lies within its band (``tolerance``, relative) as that OK claims, parts
-    leave the track, the watchdog trips when the controller's heartbeat stops, and no node
+    leave the track, the watchdog trips when the controller's heartbeat stops, feed_parts (when the
+    controller ran it) delivers its parts, and no node
     reports ERROR (or STALE) except ``expected_error``, the drive interface's status that the
     watchdog trip raises."""
     found = []
@@ -303,6 +305,12 @@ def problems(
         found.append("no part left the track")
     if summary["watchdog"].get("tripped") is not True:
         found.append("the watchdog did not trip when the controller's heartbeat stopped")
+    feed = summary.get("feed_parts", {})
+    if feed and feed.get("outcome") != "succeeded":
+        found.append(
+            f"feed_parts ended {feed.get('outcome')}: {feed.get('reason')} "
+            f"({feed.get('delivered')} parts delivered)"
+        )
     messages, times = summary["diagnostic_messages"], summary["diagnostic_at_s"]
     for name, level in sorted(summary["diagnostics"].items()):
         if level in ("ERROR", "STALE") and name != expected_error:
@@ -450,6 +458,12 @@ def main(argv: list[str] | None = None) -> int:
     print(
         f"watchdog: tripped={watchdog.get('tripped')} "
         f"state={watchdog.get('state')} reason={watchdog.get('reason')!r}"
+    )
+    feed = summary["feed_parts"]
+    print(
+        f"feed_parts: {feed.get('outcome', 'not run')}, {feed.get('delivered', 0)} parts in "
+        f"{feed.get('elapsed_s', '-')} s ({feed.get('reason', '')}); "
+        f"drive {feed.get('state_after')}"
     )
     print(f"parts fed: {summary['parts_fed']}")
     cal = summary["calibration"]

@@ -47,7 +47,7 @@ def render(interfaces: Iterable[NodeInterface]) -> str:
             ]
             lines.append("")
         if interface.services:
-            lines += ["| service | type | meaning |", "|---|---|---|"]
+            lines += ["| service or action | type | meaning |", "|---|---|---|"]
             lines += [f"| `{s.name}` | `{s.type}` | {s.description} |" for s in interface.services]
             lines.append("")
         if interface.parameters:

@@ -222,3 +222,23 @@ def test_waiting_for_nodes_returns_once_they_are_in_the_graph_and_names_the_miss
         finally:
             node.destroy_node()
             rclpy.shutdown(context=context)
+
+
+def test_a_feed_parts_goal_that_did_not_deliver_fails_the_demo(tmp_path: Path) -> None:
+    summary = _run(tmp_path)
+    summary["feed_parts"] = {
+        "step": "feed_parts",
+        "outcome": "succeeded",
+        "delivered": 3,
+        "reason": "delivered 3 parts in 4.1 s",
+    }
+    assert problems(summary, 0, 0, DRIVE) == []
+    summary["feed_parts"] = {
+        "step": "feed_parts",
+        "outcome": "starved",
+        "delivered": 1,
+        "reason": "starved: no part past sensor 1 for 20.0 s",
+    }
+    assert problems(summary, 0, 0, DRIVE) == [
+        "feed_parts ended starved: starved: no part past sensor 1 for 20.0 s (1 parts delivered)"
+    ]

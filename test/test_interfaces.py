@@ -42,6 +42,7 @@ def test_every_physical_field_names_its_unit() -> None:
         "header", "enabled", "stiffness_branch", "part_id", "phase", "on_track", "parts",
         "sensor_index", "present", "parts_out_total", "status", "status_message", "state",
         "speed_mode", "backend", "fault_reason", "level", "alarms", "message", "slip_fraction",
+        "level_state", "pause_reason", "level_sensors", "feed_active", "feed_parts_delivered",
     }  # fmt: skip
     for message_type in (
         CarrierState, DriveCommand, DriveState, PartExit, PartSensorEvent, PartState,

@@ -8,7 +8,9 @@ takes it to zero.
 
 States (``DriveState``): IDLE (output off), RAMPING (moving toward the set point or to zero),
 RUNNING (at the set point), FAULT (watchdog/backend/limits; output ramped to zero; latched until
-reset), ESTOP (output zeroed at once; latched until reset).
+reset), ESTOP (output zeroed at once; latched until reset), PAUSED (started, but feeding held by
+:meth:`DriveController.hold`, e.g. track level control with a full track: the output ramps to zero
+and returns to the set point when every hold is released).
 """
 
 from __future__ import annotations
@@ -34,6 +36,7 @@ class DriveState(IntEnum):
     RUNNING = 2
     FAULT = 3
     ESTOP = 4
+    PAUSED = 5
 
 
 @dataclass(frozen=True)
@@ -87,6 +90,7 @@ class DriveController:
         self.fault_reason = ""
         self.backend_fault = ""
         self._state = DriveState.IDLE
+        self._holds: dict[str, str] = {}  # who holds feeding (level control, ...) -> why
 
     # -- inputs from the ROS shell --------------------------------------------------------------
     def heartbeat(self, now_s: float) -> None:
@@ -110,12 +114,12 @@ class DriveController:
             limits, self.set_point.frequency_hz, self.set_point.amplitude_percent, 0.0
         )
         self.set_point = DrivePoint(clamped.frequency_hz, clamped.amplitude_percent)
-        if self.running:
+        if self.running and not self._holds:
             self.ramp.retarget(now_s, self.set_point, self.set_ramp_time_s)
         else:
-            # not running: the output heads for zero force at a frequency inside the new limits
-            # (an idle output left at a frequency the limits now exclude would fail the guard
-            # and latch a fault on a drive that does nothing)
+            # not running (or feeding held): the output heads for zero force at a frequency
+            # inside the new limits (an idle output left at a frequency the limits now exclude
+            # would fail the guard and latch a fault on a drive that does nothing)
             value = self.ramp.value(now_s)
             inside = clamp_set_point(limits, value.frequency_hz, 0.0, 0.0).frequency_hz
             target = self.ramp.target
@@ -145,6 +149,33 @@ class DriveController:
             self.ramp.zero_now(now_s)
         else:
             self.ramp.to_zero(now_s)
+
+    def hold(self, now_s: float, source: str, reason: str) -> None:
+        """Pause feeding for ``source`` (the output ramps to zero; ``running`` is kept, so the
+        drive resumes when every hold is released). A new reason from the same source is kept."""
+        held = bool(self._holds)
+        self._holds[source] = reason
+        if not held and self.running:
+            self.ramp.to_zero(now_s)
+
+    def release(self, now_s: float, source: str) -> None:
+        """End ``source``'s hold; with no hold left, a started drive ramps back to its set point."""
+        if self._holds.pop(source, None) is not None and not self._holds and self.running:
+            self.ramp.retarget(now_s, self.set_point, self.set_ramp_time_s)
+
+    @property
+    def latched(self) -> DriveState | None:
+        """FAULT or ESTOP while one is latched (at once, before the next :meth:`tick`)."""
+        return self._latched
+
+    @property
+    def paused(self) -> bool:
+        """Started, with feeding held."""
+        return self.running and bool(self._holds)
+
+    @property
+    def hold_reason(self) -> str:
+        return "; ".join(self._holds.values())
 
     # -- services -------------------------------------------------------------------------------
     def _latched_refusal(self) -> str:
@@ -185,7 +216,7 @@ class DriveController:
     ) -> DriveAnswer:
         self.set_point = target
         self.set_ramp_time_s = ramp_s
-        if self.running:
+        if self.running and not self._holds:
             used = self.ramp.retarget(now_s, target, ramp_s)
         else:
             used = max(
@@ -194,7 +225,11 @@ class DriveController:
                     target.frequency_hz, 0.0, target.frequency_hz, target.amplitude_percent
                 ),
             )
-            notes.append("set point stored; start to drive")
+            notes.append(
+                f"set point stored; feeding paused ({self.hold_reason})"
+                if self.running
+                else "set point stored; start to drive"
+            )
         if used > ramp_s + 1e-12:
             notes.append(
                 f"ramp time lengthened from {ramp_s:g} s to {used:.3f} s by the ramp-rate limits"
@@ -263,8 +298,15 @@ class DriveController:
         if refusal:
             return Answer(False, refusal)
         self.running = True
-        used = self.ramp.retarget(now_s, self.set_point, self.set_ramp_time_s)
         sp = self.set_point
+        if self._holds:
+            self.ramp.to_zero(now_s)
+            return Answer(
+                True,
+                f"started at {sp.frequency_hz:g} Hz, {sp.amplitude_percent:g} %; feeding paused "
+                f"({self.hold_reason}), resumes when it clears",
+            )
+        used = self.ramp.retarget(now_s, self.set_point, self.set_ramp_time_s)
         return Answer(
             True, f"ramping to {sp.frequency_hz:g} Hz, {sp.amplitude_percent:g} % in {used:.3f} s"
         )
@@ -326,6 +368,8 @@ class DriveController:
             self._state = self._latched
         elif not done:
             self._state = DriveState.RAMPING
+        elif self.paused:
+            self._state = DriveState.PAUSED
         elif self.running and value.amplitude_percent > 0.0:
             self._state = DriveState.RUNNING
         else:

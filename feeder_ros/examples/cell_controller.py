@@ -11,7 +11,10 @@ What a pick-and-place cell's PLC or orchestrator does with a feeder, as a small 
 3. change the speed, the same way;
 4. go silent for longer than the watchdog timeout (as a crashed controller would): the drive
    interface ramps the feeder down and reports a fault; come back, reset the fault, restart;
-5. stop.
+5. ask for parts as a robot cell does: the ``feed_parts`` action delivers a number of parts past
+   a part-present sensor, with feedback, and stops the feeder (its result comes once the output
+   is off);
+6. stop.
 
 Every step is printed with what the feeder answered; ``--timeline FILE`` writes the steps as JSON
 (the demo uses it for its summary). Installed as the ``cell_controller`` executable; run it against
@@ -34,18 +37,21 @@ from typing import Any
 
 from lifecycle_msgs.msg import Transition
 from lifecycle_msgs.srv import ChangeState, GetState
+from rclpy.action.client import ActionClient
 from rclpy.executors import MultiThreadedExecutor
 from rclpy.node import Node
 from rclpy.qos import QoSProfile, ReliabilityPolicy
 from std_msgs.msg import Header
 from std_srvs.srv import Trigger
 
+from feeder_ros.action import FeedParts
 from feeder_ros.msg import DriveState, SpeedStatus, VehicleEstimate
 from feeder_ros.ros_compat import RosSession
 from feeder_ros.srv import SetTargetSpeed
 
 RELIABLE = QoSProfile(depth=10, reliability=ReliabilityPolicy.RELIABLE)
-STATE_NAMES = {0: "idle", 1: "ramping", 2: "running", 3: "fault", 4: "e-stop"}
+STATE_NAMES = {0: "idle", 1: "ramping", 2: "running", 3: "fault", 4: "e-stop", 5: "paused"}
+FEED_OUTCOMES = ("succeeded", "starved", "faulted", "e-stopped", "canceled", "aborted", "refused")
 
 
 class CellController(Node):
@@ -222,7 +228,60 @@ class CellController(Node):
             message=status.message,
         )
 
-    def scenario(self, first_mps: float, second_mps: float, hold_s: float, timeout_s: float) -> int:
+    def feed_parts(self, count: int, sensor_index: int, timeout_s: float) -> bool:
+        """The feed_parts action: ``count`` parts past sensor ``sensor_index``; True when every
+        part came and the feeder stopped."""
+        client: Any = ActionClient(self, FeedParts, "feed_parts")
+        try:
+            if not client.wait_for_server(timeout_sec=30.0):
+                raise RuntimeError(f"action {self.get_namespace()}/feed_parts is not available")
+            goal = FeedParts.Goal(
+                mode=FeedParts.Goal.MODE_COUNT, part_count=count, sensor_index=sensor_index
+            )
+            sent = client.send_goal_async(goal, feedback_callback=self._on_feed_feedback)
+            handle = self._await(sent, 30.0, "feed_parts goal")
+            if not handle.accepted:
+                self.log("feed_parts rejected")
+                return False
+            result = self._await(handle.get_result_async(), timeout_s, "feed_parts result").result
+        finally:
+            client.destroy()
+        self.log(
+            "feed_parts",
+            outcome=FEED_OUTCOMES[result.outcome] if result.outcome < len(FEED_OUTCOMES) else "?",
+            reason=result.reason,
+            delivered=result.parts_delivered,
+            elapsed_s=round(result.elapsed_s, 2),
+            s_per_part=round(result.time_per_part_s, 2)
+            if math.isfinite(result.time_per_part_s)
+            else None,
+            state_after=self.state_name(),
+        )
+        return bool(result.outcome == FeedParts.Result.OUTCOME_SUCCEEDED)
+
+    def _on_feed_feedback(self, message: Any) -> None:
+        feedback = message.feedback
+        if feedback.parts_delivered != getattr(self, "_fed", -1):
+            self._fed = feedback.parts_delivered
+            self.log("feed_parts feedback", delivered=feedback.parts_delivered)
+
+    @staticmethod
+    def _await(future: Any, timeout_s: float, what: str) -> Any:
+        deadline = time.monotonic() + timeout_s
+        while not future.done():
+            if time.monotonic() > deadline:
+                raise RuntimeError(f"{what}: no answer in {timeout_s} s")
+            time.sleep(0.02)
+        return future.result()
+
+    def scenario(
+        self,
+        first_mps: float,
+        second_mps: float,
+        hold_s: float,
+        timeout_s: float,
+        feed_count: int = 0,
+    ) -> int:
         self.bring_up()
         if not self.wait_for("drive state", lambda: self.drive_state is not None, 30.0):
             return 1
@@ -250,10 +309,13 @@ class CellController(Node):
         self.trigger("reset_fault")
         self.start()
         self.reach_target(hold_s, timeout_s)
+        fed = True
+        if feed_count > 0:
+            fed = self.feed_parts(feed_count, sensor_index=1, timeout_s=timeout_s)
         self.trigger("stop")
         stopped = self.wait_for("stop", lambda: self.state_name() == "idle", 30.0)
         self.log("stopped", state=self.state_name())
-        return 0 if tripped and stopped else 1
+        return 0 if tripped and stopped and fed else 1
 
 
 def main(argv: list[str] | None = None) -> int:
@@ -267,6 +329,13 @@ def main(argv: list[str] | None = None) -> int:
     parser.add_argument(
         "--timeout", type=float, default=60.0, help="at most this long for each speed [s]"
     )
+    parser.add_argument(
+        "--feed-parts",
+        type=int,
+        default=3,
+        metavar="N",
+        help="then ask for N parts past sensor 1 with the feed_parts action (0: skip)",
+    )
     parser.add_argument("--timeline", type=Path, help="write the steps as JSON here")
     args = parser.parse_args(argv)
     with RosSession():
@@ -276,7 +345,9 @@ def main(argv: list[str] | None = None) -> int:
         spinner = threading.Thread(target=executor.spin, daemon=True)
         spinner.start()
         try:
-            status = controller.scenario(args.speed, args.second_speed, args.hold, args.timeout)
+            status = controller.scenario(
+                args.speed, args.second_speed, args.hold, args.timeout, args.feed_parts
+            )
         except RuntimeError as error:
             controller.log("failed", error=str(error))
             status = 1

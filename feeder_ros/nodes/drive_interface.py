@@ -19,9 +19,10 @@ Its set points go through the same limits and ramps as any other (:meth:`DriveCo
 with target-speed mode kept). Stale feedback holds the tracked centre frequency and amplitude and
 is reported in ``/diagnostics`` (WARN) and ``drive/state`` (``status`` = TRACKING_HOLD).
 
-Length: about 900 lines, the shell of four roles (lifecycle, services, resonance tracking, the two
-backends and their health); moving the tracker's coordination and the diagnostic levels into the
-ROS-free core is issue 30's work, which shrinks it below 800.
+Length: about 850 lines, the shell of five roles (lifecycle, services, resonance tracking, the two
+backends and their health, part feeding through :mod:`feeder_ros.nodes.drive_feeding`); moving
+the tracker's coordination and the diagnostic levels into the ROS-free core is issue 30's work,
+which shrinks it below 800.
 """
 
 from __future__ import annotations
@@ -46,6 +47,7 @@ from std_srvs.srv import Trigger
 
 from feeder_ros.drive.backend import BackendStatus, DriveBackend, DriveOutput, SimBackend
 from feeder_ros.drive.controller import DriveController, DriveState
+from feeder_ros.drive.level_control import LevelControl
 from feeder_ros.drive.limits import DriveLimits, Outcome
 from feeder_ros.drive.modbus import ModbusTcpBackend
 from feeder_ros.drive.resonance_tracker import (
@@ -59,14 +61,16 @@ from feeder_ros.drive.speed_model import SpeedModel, cached_speed_table, default
 from feeder_ros.identification.speed_model_file import identified_speed_table, load_speed_model
 from feeder_ros.msg import DriveCommand, PartStateArray, SpeedStatus, VehicleEstimate
 from feeder_ros.msg import DriveState as DriveStateMsg
-from feeder_ros.node_interfaces import NodeInterface, ServiceSpec, TopicSpec
+from feeder_ros.nodes.drive_feeding import Feeding
 from feeder_ros.nodes.drive_interface_parameters import (
     AT_CONFIGURE,
     DEFAULTS,
+    INTERFACE,
     LIMIT_PARAMETERS,
     PARAMETERS,
     PLANT_PREFIX,
     TRACKER_FIELDS,
+    level_settings_from,
     limits_from,
     modbus_settings_from,
     plant_from,
@@ -91,85 +95,6 @@ SIM_FEEDBACK_QOS = QoSProfile(depth=1, reliability=ReliabilityPolicy.BEST_EFFORT
 #: nodes of the cell (the simulator and estimator must keep their sample rate meanwhile)
 SPEED_TABLE_THREADS = max(1, (os.cpu_count() or 1) - 1)
 
-INTERFACE = NodeInterface(
-    executable="drive_interface",
-    node_name="drive_interface",
-    summary="managed (lifecycle) drive-command interface for the cell controller: limits, soft "
-    "ramps, heartbeat watchdog, e-stop, target-speed mode; sim or Modbus TCP backend. Parameters "
-    "read at configure are set while it is unconfigured (refused later)",
-    publishes=(
-        TopicSpec(
-            "drive/state",
-            "feeder_ros/msg/DriveState",
-            "reliable, depth 10",
-            "state (idle/ramping/running/fault/e-stop), output, set point, fault reason, "
-            "resonance tracking (off/active/hold, tracked peak); at publish_rate_hz once "
-            "configured",
-        ),
-        TopicSpec(
-            "drive/command",
-            "feeder_ros/msg/DriveCommand",
-            "reliable, depth 10",
-            "sim backend: the output, freshly stamped at publish_rate_hz (enabled=false when off)",
-        ),
-        TopicSpec(
-            "/diagnostics",
-            "diagnostic_msgs/msg/DiagnosticArray",
-            "reliable, depth 10",
-            "OK/WARN/ERROR with state, output, heartbeat age and backend link details, "
-            "resonance tracking (WARN while it holds on stale feedback); sim backend: WARN "
-            "while nothing subscribes to drive/command",
-        ),
-    ),
-    subscribes=(
-        TopicSpec(
-            "heartbeat",
-            "std_msgs/msg/Header",
-            "reliable, depth 10",
-            "the cell controller's heartbeat; none for heartbeat_timeout_s: ramp to zero, fault",
-        ),
-        TopicSpec(
-            "parts/state",
-            "feeder_ros/msg/PartStateArray",
-            "best effort, depth 1",
-            "sim backend: the simulator's sign of life; silent for sim_feedback_timeout_s after "
-            "it was live: fault (simulator lost)",
-        ),
-        TopicSpec(
-            "estimate",
-            "feeder_ros/msg/VehicleEstimate",
-            "reliable, depth 100",
-            "resonance tracking's part-speed feedback: tracking.feedback_topic of "
-            "tracking.feedback_type (or e.g. speed/status, feeder_ros/msg/SpeedStatus); "
-            "subscribed at configure",
-        ),
-    ),
-    services=(
-        ServiceSpec("start", "std_srvs/srv/Trigger", "ramp to the set point (needs heartbeat)"),
-        ServiceSpec("stop", "std_srvs/srv/Trigger", "ramp to zero"),
-        ServiceSpec(
-            "set_drive",
-            "feeder_ros/srv/SetDrive",
-            "set frequency, amplitude, ramp time: ACCEPTED / CLAMPED / REFUSED with reason",
-        ),
-        ServiceSpec(
-            "set_target_speed",
-            "feeder_ros/srv/SetTargetSpeed",
-            "part speed via the speed model; unreachable: REFUSED with the range (or CLAMPED)",
-        ),
-        ServiceSpec("reset_fault", "std_srvs/srv/Trigger", "clear a latched fault or e-stop"),
-        ServiceSpec(
-            "emergency_stop", "std_srvs/srv/Trigger", "zero output at once; latched until reset"
-        ),
-        ServiceSpec(
-            "~/change_state",
-            "lifecycle_msgs/srv/ChangeState",
-            "lifecycle transitions (and ~/get_state, ~/get_available_transitions)",
-        ),
-    ),
-    parameters=PARAMETERS,
-)
-
 
 def check_topic_name(name: str, parameter: str) -> None:
     """Raise ValueError naming ``parameter`` unless ``name`` is a valid ROS topic name."""
@@ -186,6 +111,7 @@ def check_combination(values: dict[str, Any]) -> None:
     check_topic_name(values["tracking.feedback_topic"], "tracking.feedback_topic")
     register_map_from(values)
     plant_from(values)
+    level_settings_from(values)
     if values["modbus.reconnect_min_s"] > values["modbus.reconnect_max_s"]:
         raise ValueError(
             f"modbus.reconnect_min_s={values['modbus.reconnect_min_s']:g} exceeds "
@@ -242,6 +168,7 @@ class DriveInterface(LifecycleNode):
         self.create_service(SetTargetSpeed, "set_target_speed", self._on_set_target_speed)
         self.create_service(Trigger, "reset_fault", self._on_reset_fault)
         self.create_service(Trigger, "emergency_stop", self._on_emergency_stop)
+        self._feeding = Feeding(self, self._values)
         # diagnostics in every lifecycle state: an unconfigured drive is worth a WARN too
         self.create_timer(self._values["diagnostics_period_s"], self._publish_diagnostics)
 
@@ -303,6 +230,7 @@ class DriveInterface(LifecycleNode):
         values = dict(self._values)
         try:
             limits = limits_from(values)
+            level = LevelControl(level_settings_from(values))
             speed_model = self._build_speed_model(values, limits)
         except (ValueError, RuntimeError, OSError) as error:
             self.get_logger().error(f"configure failed: {error}")
@@ -313,6 +241,7 @@ class DriveInterface(LifecycleNode):
             speed_model=speed_model,
             clamp_unreachable_speed=values["unreachable_speed"] == "clamp",
         )
+        self._feeding.configure(self._controller, level)
         if values["backend"] == "sim":
             self._command_pub = self.create_publisher(DriveCommand, "drive/command", RELIABLE)
             self._sim_heard = None
@@ -454,6 +383,7 @@ class DriveInterface(LifecycleNode):
         self._tracking_note = "not configured"
         self._tracking_mode = TrackerMode.OFF
         self._speed_feedback.teardown()
+        self._feeding.teardown(self._now())
         if self._sim_sub is not None:
             self.destroy_subscription(self._sim_sub)
             self._sim_sub = None
@@ -479,6 +409,7 @@ class DriveInterface(LifecycleNode):
             self._teardown()
         except Exception as error:  # the context may already be shut down: log, go on
             self.get_logger().warning(f"teardown on exit: {error}")
+        self._feeding.destroy()
         super().destroy_node()  # type: ignore[no-untyped-call,unused-ignore]  # untyped on Jazzy
 
     # -- the loop ------------------------------------------------------------------------------
@@ -525,6 +456,7 @@ class DriveInterface(LifecycleNode):
         self._run_tracker(controller, now)
         tracking = self._tracker is not None and self._tracker.mode is not TrackerMode.OFF
         self._speed_feedback.tick(controller, now, tracking)
+        self._feeding.tick(controller, now, self._last_output)
         output = controller.tick(now, self._period_s)
         if controller.fault_reason != self._logged_fault:
             # every fault latched here (the heartbeat watchdog, ...) is logged once; a backend
@@ -556,6 +488,7 @@ class DriveInterface(LifecycleNode):
         message.target_speed_mps = controller.target_speed_mps if controller.speed_mode else 0.0
         message.backend = self._values["backend"]
         message.fault_reason = controller.fault_reason
+        self._feeding.fill_state(message, controller)
         if self._tracker is not None:
             tracking = self._tracker.status(self._now())
             message.status = int(tracking.mode)
@@ -687,6 +620,7 @@ class DriveInterface(LifecycleNode):
         """A speed reading for the tracker; one stamped far ahead of this node's clock is ignored
         (by the tracker) with a warning: it would keep tracking ACTIVE with no fresh reading."""
         assert self._tracker is not None
+        self._feeding.speed_mps = speed_mps
         now = self._now()
         t_s = _stamp_s(stamp) or now
         if t_s > now + FUTURE_STAMP_TOLERANCE_S and math.isfinite(speed_mps):
@@ -722,6 +656,8 @@ class DriveInterface(LifecycleNode):
             level, summary = DiagnosticStatus.WARN, f"{summary}; backend: {status.warning}"
         elif not controller.watchdog.alive(now):
             level, summary = DiagnosticStatus.WARN, f"{summary}; no heartbeat"
+        elif controller.paused:
+            summary = f"{summary}: {controller.hold_reason}"
         out = self._last_output
         values = {
             "state": _STATE_NAMES[controller.state],
@@ -742,6 +678,7 @@ class DriveInterface(LifecycleNode):
             "backend fault": status.fault,
             "backend warning": status.warning,
             **status.details,
+            **self._feeding.diagnostics(),
         }
         if status.actual_frequency_hz is not None:
             values["controller actual_frequency_hz"] = f"{status.actual_frequency_hz:.3f}"
@@ -848,6 +785,8 @@ class DriveInterface(LifecycleNode):
             response.success, response.message = False, self._not_configured()
             return response
         answer = controller.reset_fault(self._now())
+        if answer.success:
+            self._feeding.reset_fault(self._now())
         message = answer.message
         if not answer.success and controller.backend_fault:
             acknowledge = getattr(backend, "acknowledge_fault", None)

@@ -1,5 +1,6 @@
-"""The drive interface's parameters (ROS free): declarations with units and ranges, defaults, and
-the conversions of a parameter dict into the cores' settings (limits, Modbus, plant, tracker).
+"""The drive interface's parameters (ROS free): declarations with units and ranges, defaults, the
+conversions of a parameter dict into the cores' settings (limits, Modbus, plant, tracker, level
+control), and the node's declared interface (topics, services, the action).
 
 :mod:`feeder_ros.nodes.drive_interface` declares them on the node; tests, docs and the cell
 description read them from here without starting ROS.
@@ -10,9 +11,11 @@ from __future__ import annotations
 from dataclasses import replace
 from typing import Any
 
+from feeder_ros.drive.level_control import LevelSettings
 from feeder_ros.drive.limits import DriveLimits, parse_bands
 from feeder_ros.drive.modbus import ModbusSettings, RegisterMap
 from feeder_ros.drive.resonance_tracker import TrackerSettings
+from feeder_ros.node_interfaces import NodeInterface, ServiceSpec, TopicSpec
 from feeder_ros.physics.parameters import PARAMETER_SPECS, FeederParameters, ParameterSpec
 
 _AT_CONFIGURE = " (read at configure)"
@@ -388,6 +391,86 @@ SPEED_FEEDBACK_PARAMETERS = (
         exclusive_minimum=True,
     ),
 )
+_LEVEL = "track level control: "
+FEEDING_PARAMETERS = (
+    ParameterSpec(
+        "part_sensor_count",
+        int,
+        "1",
+        "part-present sensors on the track, indices 0..n-1 on parts/sensor_events (the "
+        "simulator's sensor_positions_m, or the real feeder's wiring)" + _AT_CONFIGURE,
+        1,
+        64,
+    ),
+    ParameterSpec(
+        "level.mode",
+        str,
+        "",
+        _LEVEL + "off; one_sensor (full_sensor covered off_delay_s: pause, free on_delay_s: "
+        "resume); two_sensors (full_sensor covered: pause, low_sensor free: resume)"
+        + _AT_CONFIGURE,
+        choices=("off", "one_sensor", "two_sensors"),
+    ),
+    ParameterSpec(
+        "level.full_sensor_index",
+        int,
+        "1",
+        _LEVEL + "the sensor that says the track is full" + _AT_CONFIGURE,
+        0,
+        63,
+    ),
+    ParameterSpec(
+        "level.low_sensor_index",
+        int,
+        "1",
+        _LEVEL + "two_sensors: the sensor that says the track needs parts" + _AT_CONFIGURE,
+        0,
+        63,
+    ),
+    ParameterSpec(
+        "level.off_delay_s",
+        float,
+        "s",
+        _LEVEL + "the full sensor covered this long pauses feeding" + _AT_CONFIGURE,
+        0.0,
+        3600.0,
+    ),
+    ParameterSpec(
+        "level.on_delay_s",
+        float,
+        "s",
+        _LEVEL + "the resume sensor free this long resumes feeding" + _AT_CONFIGURE,
+        0.0,
+        3600.0,
+    ),
+    ParameterSpec(
+        "level.sensor_timeout_s",
+        float,
+        "s",
+        _LEVEL + "while feeding, no edge on a watched sensor this long: latched fault (sensor "
+        "or feed broken); 0: off" + _AT_CONFIGURE,
+        0.0,
+        86400.0,
+    ),
+    ParameterSpec(
+        "feed.starvation_timeout_s",
+        float,
+        "s",
+        "feed_parts: no part delivered this long while feeding ends the goal (STARVED), unless "
+        "the goal sets its own",
+        0.0,
+        3600.0,
+        exclusive_minimum=True,
+    ),
+    ParameterSpec(
+        "feed.feedback_period_s",
+        float,
+        "s",
+        "feed_parts: feedback at least this often (and at every delivered part)",
+        0.05,
+        60.0,
+    ),
+)
 PLANT_PARAMETERS = tuple(
     replace(
         spec,
@@ -404,6 +487,7 @@ PARAMETERS: dict[str, ParameterSpec] = {
         *LIMIT_PARAMETERS,
         *NODE_PARAMETERS,
         *SPEED_FEEDBACK_PARAMETERS,
+        *FEEDING_PARAMETERS,
         *TRACKING_PARAMETERS,
         *PLANT_PARAMETERS,
     )
@@ -479,6 +563,15 @@ DEFAULTS: dict[str, Any] = {
     "speed_trim.gain": 0.6,
     "speed_trim.max_step": 0.15,
     "speed_trim.max_uncertainty": 0.03,
+    "part_sensor_count": 2,
+    "level.mode": "off",
+    "level.full_sensor_index": 1,
+    "level.low_sensor_index": 0,
+    "level.off_delay_s": 1.0,
+    "level.on_delay_s": 1.0,
+    "level.sensor_timeout_s": 30.0,
+    "feed.starvation_timeout_s": 20.0,
+    "feed.feedback_period_s": 0.5,
     "tracking.enabled": False,
     "tracking.feedback_topic": "estimate",
     "tracking.feedback_type": "vehicle_estimate",
@@ -548,3 +641,111 @@ def plant_from(values: dict[str, Any]) -> FeederParameters:
 
 def tracker_settings_from(values: dict[str, Any]) -> TrackerSettings:
     return TrackerSettings(**{name: values[f"tracking.{name}"] for name in TRACKER_FIELDS})
+
+
+def level_settings_from(values: dict[str, Any]) -> LevelSettings:
+    """The level control's settings, checked against the sensors there are (LevelError)."""
+    settings = LevelSettings.from_values(
+        values["level.mode"],
+        values["level.full_sensor_index"],
+        values["level.low_sensor_index"],
+        values["level.off_delay_s"],
+        values["level.on_delay_s"],
+        values["level.sensor_timeout_s"],
+    )
+    settings.check_sensor_count(values["part_sensor_count"])
+    return settings
+
+
+INTERFACE = NodeInterface(
+    executable="drive_interface",
+    node_name="drive_interface",
+    summary="managed (lifecycle) drive-command interface for the cell controller: limits, soft "
+    "ramps, heartbeat watchdog, e-stop, target-speed mode; sim or Modbus TCP backend. Parameters "
+    "read at configure are set while it is unconfigured (refused later)",
+    publishes=(
+        TopicSpec(
+            "drive/state",
+            "feeder_ros/msg/DriveState",
+            "reliable, depth 10",
+            "state (idle/ramping/running/fault/e-stop), output, set point, fault reason, "
+            "resonance tracking (off/active/hold, tracked peak), level control (state, pause "
+            "reason, sensors), feed_parts progress; at publish_rate_hz once configured",
+        ),
+        TopicSpec(
+            "drive/command",
+            "feeder_ros/msg/DriveCommand",
+            "reliable, depth 10",
+            "sim backend: the output, freshly stamped at publish_rate_hz (enabled=false when off)",
+        ),
+        TopicSpec(
+            "/diagnostics",
+            "diagnostic_msgs/msg/DiagnosticArray",
+            "reliable, depth 10",
+            "OK/WARN/ERROR with state, output, heartbeat age and backend link details, "
+            "resonance tracking (WARN while it holds on stale feedback); sim backend: WARN "
+            "while nothing subscribes to drive/command",
+        ),
+    ),
+    subscribes=(
+        TopicSpec(
+            "heartbeat",
+            "std_msgs/msg/Header",
+            "reliable, depth 10",
+            "the cell controller's heartbeat; none for heartbeat_timeout_s: ramp to zero, fault",
+        ),
+        TopicSpec(
+            "parts/state",
+            "feeder_ros/msg/PartStateArray",
+            "best effort, depth 1",
+            "sim backend: the simulator's sign of life; silent for sim_feedback_timeout_s after "
+            "it was live: fault (simulator lost)",
+        ),
+        TopicSpec(
+            "parts/sensor_events",
+            "feeder_ros/msg/PartSensorEvent",
+            "reliable, depth 100",
+            "part-present sensor edges: track level control and feed_parts count parts with "
+            "them; subscribed at configure",
+        ),
+        TopicSpec(
+            "estimate",
+            "feeder_ros/msg/VehicleEstimate",
+            "reliable, depth 100",
+            "resonance tracking's part-speed feedback: tracking.feedback_topic of "
+            "tracking.feedback_type (or e.g. speed/status, feeder_ros/msg/SpeedStatus); "
+            "subscribed at configure",
+        ),
+    ),
+    services=(
+        ServiceSpec("start", "std_srvs/srv/Trigger", "ramp to the set point (needs heartbeat)"),
+        ServiceSpec("stop", "std_srvs/srv/Trigger", "ramp to zero"),
+        ServiceSpec(
+            "set_drive",
+            "feeder_ros/srv/SetDrive",
+            "set frequency, amplitude, ramp time: ACCEPTED / CLAMPED / REFUSED with reason",
+        ),
+        ServiceSpec(
+            "set_target_speed",
+            "feeder_ros/srv/SetTargetSpeed",
+            "part speed via the speed model; unreachable: REFUSED with the range (or CLAMPED)",
+        ),
+        ServiceSpec("reset_fault", "std_srvs/srv/Trigger", "clear a latched fault or e-stop"),
+        ServiceSpec(
+            "emergency_stop", "std_srvs/srv/Trigger", "zero output at once; latched until reset"
+        ),
+        ServiceSpec(
+            "feed_parts",
+            "feeder_ros/action/FeedParts",
+            "action: N parts past a sensor, or until a part is at the pick sensor; feedback "
+            "(delivered, speed); result once the output is off; cancel ramps to zero; one goal at "
+            "a time (others end REFUSED with the reason)",
+        ),
+        ServiceSpec(
+            "~/change_state",
+            "lifecycle_msgs/srv/ChangeState",
+            "lifecycle transitions (and ~/get_state, ~/get_available_transitions)",
+        ),
+    ),
+    parameters=PARAMETERS,
+)

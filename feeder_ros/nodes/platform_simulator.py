@@ -3,7 +3,9 @@
 Driven by ``drive/command``; publishes what a real feeder's sensors would (the carrier accelerometer
 as ``sensor_msgs/Imu``, part-present sensor edges, parts leaving the track) and the ground truth
 (carrier state, every part's state). All the physics is :class:`FeederSimulator`; this node turns
-parameters and messages into calls on it and samples into messages.
+parameters and messages into calls on it and samples into messages. With ``track_end:=stopper``
+parts queue at the end of the track until picked (:class:`TrackEndQueue`, whose module states the
+model); the core's exits are then joins to the queue, and a pick is the part leaving the feeder.
 
 Timing: samples lie on exact grids ``k / rate`` of simulated time; each tick advances the simulation
 to the tick's target time and publishes every sample up to it, so none is skipped or duplicated.
@@ -43,13 +45,19 @@ from feeder_ros.msg import (
     PartStateArray,
 )
 from feeder_ros.node_interfaces import NodeInterface, ServiceSpec, TopicSpec
-from feeder_ros.nodes.platform_simulator_parameters import NODE_DEFAULTS, NODE_PARAMETERS
+from feeder_ros.nodes.platform_simulator_parameters import (
+    NODE_DEFAULTS,
+    NODE_MODEL_SPECS,
+    NODE_PARAMETERS,
+    parse_positions,
+)
 from feeder_ros.nodes.ros_parameters import declare_parameters, validator
 from feeder_ros.nodes.runner import run_node
 from feeder_ros.physics.drive import DriveError
 from feeder_ros.physics.errors import SimulationError
 from feeder_ros.physics.parameters import PARAMETER_SPECS, FeederParameters, ParameterError
 from feeder_ros.physics.simulation import EventKind, FeederSimulator, PartSpec, Phase
+from feeder_ros.physics.track_end import Picks, TrackEndQueue, pick_edges
 from feeder_ros.sensors.accelerometer import AccelerometerModel
 from feeder_ros.sensors.part_presence import PartSensorArray
 from feeder_ros.srv import SpawnParts
@@ -82,7 +90,7 @@ NODE_DRIVE_SPECS = {
         "drive/command (`feeder sim`: the drive amplitude A)",
     ),
 }
-PARAMETERS = {**PARAMETER_SPECS, **NODE_DRIVE_SPECS, **NODE_PARAMETERS}
+PARAMETERS = {**PARAMETER_SPECS, **NODE_DRIVE_SPECS, **NODE_MODEL_SPECS, **NODE_PARAMETERS}
 
 # sensor data: best effort and volatile like qos_profile_sensor_data, but with a history deep
 # enough for a tick's burst (at 1 kHz and 10 ms ticks, 10 samples leave at once): with
@@ -142,8 +150,9 @@ INTERFACE = NodeInterface(
             "parts/state",
             "feeder_ros/msg/PartStateArray",
             "reliable, depth 1000",
-            "the position, velocity and phase of each part on the track (ground truth); a part "
-            "that left is listed once more, with on_track false",
+            "the position, velocity and phase of each part on the track (ground truth; parts "
+            "queued at a stopper at their slots, sticking); a part that left is listed once "
+            "more, with on_track false",
         ),
         TopicSpec(
             "parts/sensor_events",
@@ -155,39 +164,30 @@ INTERFACE = NodeInterface(
             "parts/exit",
             "feeder_ros/msg/PartExit",
             "reliable, depth 1000",
-            "a part left the end of the track (feed count)",
+            "a part left the feeder (feed count): past the end of the track, or picked at the "
+            "stopper (track_end)",
         ),
         TopicSpec("/clock", "rosgraph_msgs/msg/Clock", "reliable", "simulated time (use_sim_time)"),
         TopicSpec(
             "/diagnostics",
             "diagnostic_msgs/msg/DiagnosticArray",
             "reliable, depth 10",
-            "simulation health at 1 Hz: achieved real-time factor, lag, samples, parts",
+            "simulation health at 1 Hz: achieved real-time factor, lag, samples, parts; with a "
+            "stopper the queue, parts picked, feeds skipped on a full track",
         ),
     ),
     services=(
         ServiceSpec("~/reset", "std_srvs/srv/Trigger", "back to t = 0 with the initial parts"),
         ServiceSpec("~/spawn_parts", "feeder_ros/srv/SpawnParts", "put parts on the track"),
+        ServiceSpec(
+            "~/pick_part",
+            "std_srvs/srv/Trigger",
+            "pick the front part at the stopper now (parts/exit); refused with the reason when "
+            "the queue is empty or track_end is open",
+        ),
     ),
     parameters=PARAMETERS,
 )
-
-
-def parse_positions(text: str) -> list[float]:
-    """Sensor positions from "0.1, 0.185"; refuses NaN, negatives and garbage with the value."""
-    positions: list[float] = []
-    for item in text.split(","):
-        item = item.strip()
-        if not item:
-            continue
-        try:
-            value = float(item)
-        except ValueError:
-            raise ValueError(f"sensor_positions_m: {item!r} is not a number") from None
-        if not math.isfinite(value) or value < 0.0:
-            raise ValueError(f"sensor_positions_m: {item!r} must be a finite position >= 0")
-        positions.append(value)
-    return sorted(positions)
 
 
 def _check_combination(values: dict[str, Any]) -> None:
@@ -195,6 +195,8 @@ def _check_combination(values: dict[str, Any]) -> None:
     parse_positions(values["sensor_positions_m"])
     if values["real_time_factor"] == 0.0 and not values.get("use_sim_time", False):
         raise ValueError("real_time_factor=0 (unpaced) needs use_sim_time=true")
+    if values["track_end"] == "stopper" and values["part_length_m"] <= 0.0:
+        raise ValueError("track_end=stopper needs part_length_m > 0 (the queue's slot)")
 
 
 class PlatformSimulator(Node):
@@ -229,6 +231,7 @@ class PlatformSimulator(Node):
         self.create_subscription(DriveCommand, "drive/command", self._on_command, COMMAND_QOS)
         self.create_service(Trigger, "~/reset", self._on_reset)
         self.create_service(SpawnParts, "~/spawn_parts", self._on_spawn)
+        self.create_service(Trigger, "~/pick_part", self._on_pick)
 
         self._failure: str | None = None  # the last solver failure, until the drive runs again
         self._late_commands = 0  # commands applied at once because the simulation lagged
@@ -250,7 +253,21 @@ class PlatformSimulator(Node):
         return dict(self._values)
 
     def _physics(self) -> FeederParameters:
-        return FeederParameters.from_mapping({k: self._values[k] for k in PARAMETER_SPECS})
+        physics = FeederParameters.from_mapping({k: self._values[k] for k in PARAMETER_SPECS})
+        if self._queue is None:
+            return physics
+        self._queue.set_track_length(physics.track_length_m)  # the stopper; the core: the tail
+        return physics.with_changes(track_length_m=self._queue.core_track_length_m)
+
+    def _follow_queue(self) -> None:
+        """The core's track ends at the queue's tail (where parts join it)."""
+        end = (
+            self._sim.params.track_length_m
+            if self._queue is None
+            else self._queue.core_track_length_m
+        )
+        if end != self._sim.params.track_length_m:
+            self._sim.set_parameters(self._sim.params.with_changes(track_length_m=end))
 
     def _apply_parameters(self, parameters: list[AnyParameter]) -> None:
         changed = {p.name for p in parameters if p.name in PARAMETERS}
@@ -284,6 +301,8 @@ class PlatformSimulator(Node):
                 self._accelerometer = self._make_accelerometer()
             if "feed_interval_s" in changed:
                 self._last_feed_s = self._sim.time_s  # feeding counts from the change
+            if "pick_interval_s" in changed:
+                self._last_pick_s = self._sim.time_s
             if "real_time_factor" in changed:
                 self._rebase_pacing()
 
@@ -302,6 +321,11 @@ class PlatformSimulator(Node):
 
     def _start(self) -> None:
         """(Re)start the simulation at t = 0 with the initial parts and no drive."""
+        self._queue = None
+        if self._values["track_end"] == "stopper":
+            self._queue = TrackEndQueue(
+                self._values["track_length_m"], self._values["part_length_m"]
+            )
         physics = self._physics().with_changes(drive_amplitude_n=0.0)
         count = self._values["initial_parts"]
         start, spacing = self._values["part_start_m"], self._values["part_spacing_m"]
@@ -318,6 +342,7 @@ class PlatformSimulator(Node):
         self._parts_out = 0
         self._exit_listed = np.zeros(count, bool)  # exited parts already sent once on parts/state
         self._last_feed_s = 0.0
+        self._last_pick_s = 0.0
         self._epoch_ns = 0 if self._sim_clock else self.get_clock().now().nanoseconds
         self._command_deadline_s = math.inf
         self._drive = (physics.drive_frequency_hz, 0.0)
@@ -438,13 +463,13 @@ class PlatformSimulator(Node):
             value = getattr(request, name)
             if not math.isfinite(value) or value < 0.0:
                 problems.append(f"{name}={value!r} must be a finite value >= 0")
-        if not problems and (
-            request.position_m + (request.count - 1) * request.spacing_m
-            >= self._values["track_length_m"]
-        ):
+        end, limit = self._values["track_length_m"], "track_length_m"
+        if self._queue is not None:
+            end, limit = self._queue.tail_m, "the tail of the queue at the stopper"
+        if not problems and request.position_m + (request.count - 1) * request.spacing_m >= end:
             problems.append(
                 f"parts from {request.position_m} m spaced {request.spacing_m} m do not fit on "
-                f"the track (track_length_m={self._values['track_length_m']})"
+                f"the track ({limit}: {end:g} m)"
             )
         if problems:
             response.success = False
@@ -460,6 +485,15 @@ class PlatformSimulator(Node):
         response.success = True
         response.part_ids = ids
         response.message = f"spawned {len(ids)} parts"
+        return response
+
+    def _on_pick(self, request: Trigger.Request, response: Trigger.Response) -> Any:
+        with self._lock:
+            response.success, response.message = (
+                (False, "track_end is open: parts leave at the end of the track")
+                if self._queue is None
+                else self._queue.answer_pick(self._sim.time_s)
+            )
         return response
 
     # -- the loop ------------------------------------------------------------------------------
@@ -543,11 +577,13 @@ class PlatformSimulator(Node):
                 "state_samples_published": str(self._state_index - 1),
                 "parts_on_track": str(on_track),
                 "parts_out_total": str(self._parts_out),
+                "track_end": self._values["track_end"],
                 "drive_frequency_hz": f"{self._drive[0]:g}",
                 "drive_amplitude_n": f"{self._drive[1]:g}",
                 "forward_natural_frequency_hz": f"{plant.forward_natural_frequency_hz:.4g}",
                 "backward_natural_frequency_hz": f"{plant.backward_natural_frequency_hz:.4g}",
             }
+            values |= self._queue.status() if self._queue is not None else {}
             failure = self._failure
         level, text = DiagnosticStatus.OK, f"running at {achieved:.2f}x real time"
         if failure is not None:
@@ -573,13 +609,24 @@ class PlatformSimulator(Node):
         self._diagnostics_pub.publish(array)
 
     def _feed(self, target: float) -> None:
-        interval = self._values["feed_interval_s"]
-        if interval <= 0.0:
-            return
-        while self._last_feed_s + interval <= target:
-            self._last_feed_s += interval
-            self._advance(self._last_feed_s)
-            self._sim.spawn_part(PartSpec(position_m=self._values["part_start_m"]))
+        """The bowl's feeds and the robot's periodic picks due by ``target``, in time order."""
+        feed = self._values["feed_interval_s"]
+        pick = self._values["pick_interval_s"] if self._queue is not None else 0.0
+        while True:
+            next_feed = self._last_feed_s + feed if feed > 0.0 else math.inf
+            next_pick = self._last_pick_s + pick if pick > 0.0 else math.inf
+            t = min(next_feed, next_pick)
+            if t > target:
+                return
+            self._advance(t)
+            start = self._values["part_start_m"]
+            if t == next_feed:
+                self._last_feed_s = t
+                if self._queue is None or self._queue.admit_feed(start):
+                    self._sim.spawn_part(PartSpec(position_m=start))
+            if t == next_pick and self._queue is not None:
+                self._last_pick_s = t
+                self._queue.periodic_pick()
 
     def _grid(self, index: int, rate: float, t_end: float) -> tuple[np.ndarray, int]:
         last = math.floor(t_end * rate + 1e-9)
@@ -598,12 +645,21 @@ class PlatformSimulator(Node):
             self._parts_index, self._values["parts_rate_hz"], t_end
         )
         times = np.union1d(np.union1d(imu_t, state_t), parts_t)
+        queue, picks, t_start = self._queue, Picks(), self._sim.time_s
+        if queue is not None:  # both ends sampled: where parts meet the queue, or jump in it
+            times = np.union1d(times, (t_start, t_end))
+            picks = queue.take_picks()
+            self._follow_queue()
         if times.size:
             t_end = max(t_end, float(times[-1]))  # k / rate may round just above t_end
         segments = self._sim.drive.segments()
         result = self._sim.advance(t_end, times)
+        exits = result.event_kind == EventKind.PART_EXIT
+        if queue is None:  # exits left the feeder; with a stopper they joined the queue
+            self._publish_exits(result.event_t_s[exits], result.event_part[exits])
+        else:
+            self._publish_exits(np.full(len(picks.parts), t_start), picks.parts)
         if times.size == 0:
-            self._publish_exits(result)
             return
         accel = result.carrier_a_mps2
         if imu_t.size:
@@ -623,7 +679,14 @@ class PlatformSimulator(Node):
             }
             self._publish_states(state_t, columns)
         track = result.part_x_m - result.carrier_x_m[:, None]
-        for edge in self._sensors.update(times, track):
+        if queue is None:
+            edges = self._sensors.update(times, track)
+        else:
+            before = queue.before_picks(track[0], picks)
+            queue.settle(times, track, result.event_t_s[exits], result.event_part[exits])
+            self._follow_queue()
+            edges = pick_edges(self._sensors, times, track, before, picks)
+        for edge in edges:
             event = PartSensorEvent()
             event.header.stamp = self._stamp(edge.t_s)
             event.sensor_index = edge.sensor_index
@@ -635,7 +698,6 @@ class PlatformSimulator(Node):
             rows = np.searchsorted(times, parts_t)
             for j, row in enumerate(rows):
                 self._publish_parts(parts_t[j], result, row, track[row])
-        self._publish_exits(result)
 
     def _publish_imu(self, t: np.ndarray, measured: np.ndarray) -> None:
         frame = self._values["imu_frame_id"]
@@ -689,7 +751,9 @@ class PlatformSimulator(Node):
         message.header.frame_id = "track"
         carrier_v = float(result.carrier_v_mps[row])
         phases = result.part_phase[row]
-        exited = phases == Phase.EXITED
+        exited = np.isnan(track)  # left the core, and not queued at a stopper
+        queue = self._queue
+        queued = np.zeros(phases.size, bool) if queue is None else queue.queued_at(t, phases.size)
         # the parts on the track, and each exited part once (on_track false): the message stays
         # the size of the track's load however many parts have passed (listing every part ever
         # fed grew it by a part per feed interval, and its cost with it, in every subscriber)
@@ -703,12 +767,12 @@ class PlatformSimulator(Node):
             phase = int(phases[i])
             part = PartState()
             part.part_id = int(i)
-            part.on_track = phase != Phase.EXITED
-            if part.on_track:
+            part.on_track = not exited[i]
+            if part.on_track:  # a queued part stands still on the carrier
                 part.position_m = float(track[i])
-                part.velocity_mps = float(result.part_v_mps[row, i])
+                part.velocity_mps = carrier_v if queued[i] else float(result.part_v_mps[row, i])
                 part.relative_velocity_mps = part.velocity_mps - carrier_v
-                part.phase = phase
+                part.phase = Phase.STICK if queued[i] else phase
             else:
                 part.position_m = math.nan
                 part.velocity_mps = math.nan
@@ -716,9 +780,8 @@ class PlatformSimulator(Node):
             message.parts.append(part)
         self._parts_pub.publish(message)
 
-    def _publish_exits(self, result: Any) -> None:
-        exits = result.event_kind == EventKind.PART_EXIT
-        for t, part in zip(result.event_t_s[exits], result.event_part[exits], strict=True):
+    def _publish_exits(self, times: np.ndarray, parts: Any) -> None:
+        for t, part in zip(times, parts, strict=True):
             self._parts_out += 1
             message = PartExit()
             message.header.stamp = self._stamp(float(t))

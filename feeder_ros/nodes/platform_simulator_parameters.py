@@ -1,15 +1,26 @@
 """Parameters of the platform simulator node besides the model's (ROS-free, shared with the CLI).
 
 The model parameters are :data:`feeder_ros.physics.parameters.PARAMETER_SPECS`; these are the
-node's own: sample rates, pacing, the sensors it simulates and the parts it puts on the track.
+node's own: sample rates, pacing, the sensors it simulates, the parts it puts on the track and the
+end of the track (open, or a stopper where parts queue until picked).
 """
 
 from __future__ import annotations
 
+import dataclasses
+import math
 from typing import Any
 
-from feeder_ros.physics.parameters import ParameterSpec
+from feeder_ros.physics.parameters import PARAMETER_SPECS, ParameterSpec
 
+#: model parameters that mean more to the node: the track length is also where a stopper stands
+NODE_MODEL_SPECS: dict[str, ParameterSpec] = {
+    "track_length_m": dataclasses.replace(
+        PARAMETER_SPECS["track_length_m"],
+        description="track length: a part past it leaves the feeder (track_end open), or the "
+        "stopper where parts queue (track_end stopper)",
+    )
+}
 NODE_PARAMETERS: dict[str, ParameterSpec] = {
     spec.name: spec
     for spec in (
@@ -84,7 +95,33 @@ NODE_PARAMETERS: dict[str, ParameterSpec] = {
             "put a new part at part_start_m this often (a bowl feeding the track); 0: off",
             minimum=0.0,
         ),
-        ParameterSpec("part_length_m", float, "m", "part length seen by the sensors", 0.0, 1.0),
+        ParameterSpec(
+            "part_length_m",
+            float,
+            "m",
+            "part length seen by the sensors and, with a stopper (track_end), its slot in the "
+            "queue; read at start and on reset",
+            0.0,
+            1.0,
+        ),
+        ParameterSpec(
+            "track_end",
+            str,
+            "",
+            "open: parts leave at track_length_m (parts/exit); stopper: they queue there, each "
+            "part_length_m long and sitting still, until picked (pick_interval_s, ~/pick_part); "
+            "feeds onto a full track are skipped",
+            choices=("open", "stopper"),
+            read_only=True,
+        ),
+        ParameterSpec(
+            "pick_interval_s",
+            float,
+            "s",
+            "track_end stopper: a robot picks the front part this often (published on "
+            "parts/exit); 0: only on request (~/pick_part)",
+            minimum=0.0,
+        ),
         ParameterSpec(
             "sensor_positions_m",
             str,
@@ -143,6 +180,8 @@ NODE_DEFAULTS: dict[str, Any] = {
     "part_spacing_m": 0.02,
     "feed_interval_s": 0.0,
     "part_length_m": 0.01,
+    "track_end": "open",
+    "pick_interval_s": 0.0,
     "sensor_positions_m": "0.1, 0.185",
     "imu_noise_density_mps2_per_sqrt_hz": 0.0015,
     "imu_bias_mps2": 0.0,
@@ -152,3 +191,20 @@ NODE_DEFAULTS: dict[str, Any] = {
     "imu_seed": 1,
     "imu_frame_id": "carrier_imu",
 }
+
+
+def parse_positions(text: str) -> list[float]:
+    """Sensor positions from "0.1, 0.185"; refuses NaN, negatives and garbage with the value."""
+    positions: list[float] = []
+    for item in text.split(","):
+        item = item.strip()
+        if not item:
+            continue
+        try:
+            value = float(item)
+        except ValueError:
+            raise ValueError(f"sensor_positions_m: {item!r} is not a number") from None
+        if not math.isfinite(value) or value < 0.0:
+            raise ValueError(f"sensor_positions_m: {item!r} must be a finite position >= 0")
+        positions.append(value)
+    return sorted(positions)

@@ -299,3 +299,72 @@ def test_target_speed_refuses_non_finite_speeds_and_treats_negative_ones_as_unre
     assert clamped.outcome is Outcome.CLAMPED
     assert clamped.predicted_speed_mps == 0.0
     assert clamped.amplitude_percent == 0.0
+
+
+def test_a_hold_ramps_feeding_to_zero_and_its_release_ramps_back() -> None:
+    c = running_controller()
+    c.heartbeat(2.5)
+    assert c.tick(2.5, 0.02).amplitude_percent == 50.0  # running at the set point
+    c.hold(3.0, "level", "track full")
+    assert c.paused
+    assert c.hold_reason == "track full"
+    out = c.tick(4.0, 0.02)  # 25 %/s: halfway down
+    assert c.state is DriveState.RAMPING
+    assert out.amplitude_percent == pytest.approx(25.0)
+    c.heartbeat(5.0)
+    out = c.tick(5.5, 0.02)
+    assert c.state is DriveState.PAUSED
+    assert not out.enabled
+    assert out.frequency_hz == 30.0  # the frequency is held
+    c.release(6.0, "level")
+    assert not c.paused
+    c.heartbeat(7.0)
+    assert c.tick(7.0, 0.02).amplitude_percent == pytest.approx(25.0)
+    assert c.tick(8.0, 0.02).amplitude_percent == 50.0
+    assert c.state is DriveState.RUNNING
+
+
+def test_a_new_set_point_while_paused_is_stored_and_used_on_release() -> None:
+    c = running_controller()
+    c.hold(0.0, "level", "track full")
+    answer = c.set_drive(0.5, 40.0, 20.0, 0.0)
+    assert answer.outcome is Outcome.ACCEPTED
+    assert "feeding paused (track full)" in answer.reason
+    c.heartbeat(1.0)
+    assert not c.tick(1.0, 0.02).enabled  # still held at zero
+    c.release(1.0, "level")
+    c.heartbeat(3.0)
+    out = c.tick(3.0, 0.02)
+    assert (out.frequency_hz, out.amplitude_percent) == (40.0, 20.0)
+
+
+def test_two_holds_release_only_when_both_end_and_stop_keeps_the_output_off() -> None:
+    c = running_controller()
+    c.hold(0.0, "level", "track full")
+    c.hold(0.0, "feed", "goal done")
+    c.release(0.1, "level")
+    assert c.paused
+    assert c.hold_reason == "goal done"
+    c.heartbeat(1.0)
+    assert not c.tick(1.0, 0.02).enabled
+    c.stop(1.0)
+    c.release(1.1, "feed")
+    c.heartbeat(2.0)
+    assert not c.tick(3.0, 0.02).enabled
+    assert c.state is DriveState.IDLE
+
+
+def test_start_while_held_answers_paused_and_does_not_drive() -> None:
+    c = DriveController(LIMITS)
+    c.activate(0.0)
+    c.heartbeat(0.0)
+    c.set_drive(0.0, 30.0, 50.0, 0.0)
+    c.hold(0.0, "level", "track full: sensor 1 covered for 1.0 s")
+    answer = c.start(0.0)
+    assert answer.success
+    assert "feeding paused (track full: sensor 1" in answer.message
+    c.heartbeat(1.0)
+    assert not c.tick(1.0, 0.02).enabled
+    assert c.state is DriveState.PAUSED
+    c.release(1.0, "level")
+    assert c.tick(2.0, 0.02).amplitude_percent == pytest.approx(25.0)
