@@ -67,6 +67,9 @@ class CellController(Node):
         self.create_subscription(SpeedStatus, "speed/status", self._on_speed_status, RELIABLE)
         self.create_subscription(VehicleEstimate, "estimate", self._on_estimate, RELIABLE)
         self.create_timer(0.2, self._beat)
+        # kept for the node's life: destroying an action client while the executor thread spins
+        # can leave that thread a dangling handle (RCLError in its wait set)
+        self._feed_client: Any = ActionClient(self, FeedParts, "feed_parts")
         self._start_time = time.monotonic()
 
     # -- inputs --------------------------------------------------------------------------------
@@ -231,21 +234,18 @@ class CellController(Node):
     def feed_parts(self, count: int, sensor_index: int, timeout_s: float) -> bool:
         """The feed_parts action: ``count`` parts past sensor ``sensor_index``; True when every
         part came and the feeder stopped."""
-        client: Any = ActionClient(self, FeedParts, "feed_parts")
-        try:
-            if not client.wait_for_server(timeout_sec=30.0):
-                raise RuntimeError(f"action {self.get_namespace()}/feed_parts is not available")
-            goal = FeedParts.Goal(
-                mode=FeedParts.Goal.MODE_COUNT, part_count=count, sensor_index=sensor_index
-            )
-            sent = client.send_goal_async(goal, feedback_callback=self._on_feed_feedback)
-            handle = self._await(sent, 30.0, "feed_parts goal")
-            if not handle.accepted:
-                self.log("feed_parts rejected")
-                return False
-            result = self._await(handle.get_result_async(), timeout_s, "feed_parts result").result
-        finally:
-            client.destroy()
+        client = self._feed_client
+        if not client.wait_for_server(timeout_sec=30.0):
+            raise RuntimeError(f"action {self.get_namespace()}/feed_parts is not available")
+        goal = FeedParts.Goal(
+            mode=FeedParts.Goal.MODE_COUNT, part_count=count, sensor_index=sensor_index
+        )
+        sent = client.send_goal_async(goal, feedback_callback=self._on_feed_feedback)
+        handle = self._await(sent, 30.0, "feed_parts goal")
+        if not handle.accepted:
+            self.log("feed_parts rejected")
+            return False
+        result = self._await(handle.get_result_async(), timeout_s, "feed_parts result").result
         self.log(
             "feed_parts",
             outcome=FEED_OUTCOMES[result.outcome] if result.outcome < len(FEED_OUTCOMES) else "?",

@@ -60,6 +60,12 @@ class Wire:
         with self.lock:
             return [p for t, s, p, on in self.edges if s == sensor and not on and start <= t < end]
 
+    def goal_ends(self) -> list[DriveState]:
+        """The drive states that first said a feed_parts goal had ended."""
+        with self.lock:
+            states = [m for _, m in self.states]
+        return [m for p, m in itertools.pairwise(states) if p.feed_active and not m.feed_active]
+
     def last_state(self) -> DriveState | None:
         with self.lock:
             return self.states[-1][1] if self.states else None
@@ -125,12 +131,24 @@ def feeding_cell(
                 )
                 assert answer.result != SetDrive.Response.REFUSED, answer.reason
                 assert client.wait_for_server(timeout_sec=30.0)
+                # the drive has heard the controller's heartbeat once it starts (just after
+                # start-up the topic is still being discovered): start, then stop at once
+                assert controller.start(wait_s=30.0)
+                assert controller.trigger("stop")
+                assert wait_until(
+                    lambda: (
+                        wire.last_state() is not None
+                        and wire.last_state().state == DriveState.STATE_IDLE
+                    ),
+                    30.0,
+                )
                 # the simulator is up once its sensor edges flow (initial parts under a sensor
                 # do not move without the drive: wait for its parts/state instead)
                 assert wait_until(lambda: wire.last_state() is not None, 30.0)
                 yield probe, wire, controller, client
             finally:
-                client.destroy()
+                # (the action client goes with the probe: destroyed while the probe's executor
+                # thread spins, it can leave that thread a dangling handle)
                 executor.remove_node(controller)
                 controller.destroy_node()
     finally:
@@ -186,12 +204,12 @@ def test_feed_parts_delivers_exactly_n_parts_and_stops_the_feeder(tmp_path: Path
         assert result.parts_delivered == 3
         passed = wire.passed(1, start, end)
         assert len(passed) == 3, passed  # exactly the parts asked for passed the sensor
-        # the result came once the output was off: drive/state says so, and stays so
-        state = wire.last_state()
-        assert state is not None
+        # the goal ended once the output was off: the drive state that says so (published
+        # before the result; the two arrive by different readers) has the output at zero
+        assert wait_until(lambda: len(wire.goal_ends()) == 1, 5.0)
+        state = wire.goal_ends()[0]
         assert state.amplitude_percent == 0.0
         assert state.state == DriveState.STATE_IDLE
-        assert not state.feed_active
         assert state.feed_parts_delivered == 3
         time.sleep(3.0)
         assert wire.passed(1, end) == []  # nothing more passed: the feeder stopped
@@ -232,7 +250,8 @@ def test_cancel_starvation_estop_and_bad_goals_end_with_their_reasons(tmp_path: 
         result = goal.result(10.0)
         assert result.outcome == FeedParts.Result.OUTCOME_CANCELED, result.reason
         assert goal.result_at - asked <= STOP_RAMP_S + 1.0
-        assert wire.last_state().amplitude_percent == 0.0
+        assert wait_until(lambda: len(wire.goal_ends()) == 1, 5.0)
+        assert wire.goal_ends()[0].amplitude_percent == 0.0
 
         # e-stop while feeding: ESTOPPED at once
         goal = Goal(client, FeedParts.Goal.MODE_COUNT, 500, sensor=1)
@@ -265,7 +284,8 @@ def test_a_feeder_without_parts_starves_the_goal_after_its_feeding_time(tmp_path
         assert math.isnan(result.time_per_part_s)
         # the time-out counts feeding time: at least 2 s after the output came on
         assert result.elapsed_s >= 2.0
-        assert wire.last_state().amplitude_percent == 0.0
+        assert wait_until(lambda: len(wire.goal_ends()) == 1, 5.0)
+        assert wire.goal_ends()[0].amplitude_percent == 0.0
 
 
 def _stamp(message: Any) -> float:
