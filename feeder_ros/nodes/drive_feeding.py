@@ -40,7 +40,6 @@ from feeder_ros.drive.part_feed import (
 from feeder_ros.msg import PartSensorEvent
 
 if TYPE_CHECKING:
-    from rclpy.action.server import ServerGoalHandle
     from rclpy.node import Node
 
     from feeder_ros.drive.backend import DriveOutput
@@ -58,10 +57,10 @@ class _Goal:
     """A running feed_parts goal: its core, its action handle, and the future its execution
     waits on (set once the goal has ended and the output is off)."""
 
-    def __init__(self, feed: PartFeed, handle: ServerGoalHandle) -> None:
+    def __init__(self, feed: PartFeed, handle: Any) -> None:
         self.feed = feed
         self.handle = handle
-        self.future: Future = Future()
+        self.future: Any = Future()  # Future[FeedProgress] (generic on Kilted only)
         self.final: FeedProgress | None = None
         self.feedback_t = -math.inf
         self.feedback_delivered = -1
@@ -249,7 +248,7 @@ class Feeding:
             int(self._values["part_sensor_count"]),
         )
 
-    async def _execute(self, handle: ServerGoalHandle) -> Any:
+    async def _execute(self, handle: Any) -> Any:
         now_s = float(self._node.get_clock().now().nanoseconds) * 1e-9
         request = handle.request
         refusal = self._refusal(request, now_s)
@@ -286,7 +285,7 @@ class Feeding:
             return f"{request.part_count} parts past sensor {request.sensor_index}"
         return f"until a part is at sensor {request.sensor_index}"
 
-    def _refused(self, handle: ServerGoalHandle, reason: str) -> Any:
+    def _refused(self, handle: Any, reason: str) -> Any:
         self._node.get_logger().warning(f"feed_parts goal refused: {reason}")
         handle.abort()
         result = FeedParts.Result()
@@ -295,7 +294,7 @@ class Feeding:
         result.time_per_part_s = math.nan
         return result
 
-    def _result(self, handle: ServerGoalHandle, progress: FeedProgress) -> Any:
+    def _result(self, handle: Any, progress: FeedProgress) -> Any:
         result = FeedParts.Result()
         outcome = progress.outcome if progress.outcome is not None else FeedOutcome.ABORTED
         result.outcome = int(outcome)
