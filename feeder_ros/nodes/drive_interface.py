@@ -409,7 +409,11 @@ class DriveInterface(LifecycleNode):
             self._teardown()
         except Exception as error:  # the context may already be shut down: log, go on
             self.get_logger().warning(f"teardown on exit: {error}")
-        self._feeding.destroy()
+        # a constructor that refused its parameters never made it (Kilted's context still
+        # destroys such a node at shutdown)
+        feeding: Feeding | None = getattr(self, "_feeding", None)
+        if feeding is not None:
+            feeding.destroy()
         super().destroy_node()  # type: ignore[no-untyped-call,unused-ignore]  # untyped on Jazzy
 
     # -- the loop ------------------------------------------------------------------------------
