@@ -43,6 +43,7 @@ def test_every_physical_field_names_its_unit() -> None:
         "sensor_index", "present", "parts_out_total", "status", "status_message", "state",
         "speed_mode", "backend", "fault_reason", "level", "alarms", "message", "slip_fraction",
         "level_state", "pause_reason", "level_sensors", "feed_active", "feed_parts_delivered",
+        "amplitude_regulated",
     }  # fmt: skip
     for message_type in (
         CarrierState, DriveCommand, DriveState, PartExit, PartSensorEvent, PartState,

@@ -208,6 +208,7 @@ class RegulatorOutput:
     amplitude_percent: float  #: the drive amplitude to command
     limited: bool  #: at the drive's limit (anti-windup: no accumulation beyond it)
     reason: str  #: '' or why the output is not simply the regulated one (limit, warning, stale)
+    steady: bool = False  #: the window's drive stood still: its gain was measured
 
 
 class AmplitudeRegulator:
@@ -318,7 +319,7 @@ class AmplitudeRegulator:
             )
         if limited:
             warning = "; ".join(filter(None, (self._limit_reason, warning)))
-        self._output = RegulatorOutput(command, limited, warning)
+        self._output = RegulatorOutput(command, limited, warning, bool(steady))
         return self._output
 
     def output(self, t_s: float, current_percent: float) -> RegulatorOutput:

@@ -11,6 +11,13 @@ RUNNING (at the set point), FAULT (watchdog/backend/limits; output ramped to zer
 reset), ESTOP (output zeroed at once; latched until reset), PAUSED (started, but feeding held by
 :meth:`DriveController.hold`, e.g. track level control with a full track: the output ramps to zero
 and returns to the set point when every hold is released).
+
+**Amplitude correction** (:meth:`DriveController.scale_amplitude`): an inner loop (vibration-
+amplitude regulation) may scale the output amplitude: the output is the ramp value times the
+scale, clamped to ``max_amplitude_percent``, the scale slewed so that the output changes no
+faster than ``max_amplitude_rate_percent_per_s``. The set point, and every outer loop writing it
+(set_drive, target-speed mode, its trim, resonance tracking), stays unscaled. An output that goes
+off forgets the correction: the next start begins at the set point itself.
 """
 
 from __future__ import annotations
@@ -91,6 +98,9 @@ class DriveController:
         self.backend_fault = ""
         self._state = DriveState.IDLE
         self._holds: dict[str, str] = {}  # who holds feeding (level control, ...) -> why
+        self.amplitude_scale = 1.0  # the inner amplitude loop's correction in force
+        self._scale_target = 1.0
+        self._last_tick_s: float | None = None
 
     # -- inputs from the ROS shell --------------------------------------------------------------
     def heartbeat(self, now_s: float) -> None:
@@ -338,6 +348,25 @@ class DriveController:
         self.fault_reason = ""
         return Answer(True, f"cleared ({previous}); output stays off until start")
 
+    def scale_amplitude(self, scale: float) -> None:
+        """Scale the output amplitude by ``scale`` (>= 0, finite; 1: none): see the module
+        docstring. Raises ValueError naming a bad value."""
+        if not (isinstance(scale, float | int) and math.isfinite(scale) and scale >= 0.0):
+            raise ValueError(f"amplitude scale {scale!r} must be a finite number >= 0")
+        self._scale_target = float(scale)
+
+    def _slewed_scale(self, now_s: float, amplitude_percent: float) -> float:
+        """The scale in force at ``now_s``: toward the requested one at the amplitude rate."""
+        previous, self._last_tick_s = self._last_tick_s, now_s
+        target, scale = self._scale_target, self.amplitude_scale
+        if amplitude_percent <= 0.0 or previous is None:
+            self.amplitude_scale = target
+        else:
+            rate = self.limits.max_amplitude_rate_percent_per_s
+            step = max(0.0, now_s - previous) * rate / amplitude_percent
+            self.amplitude_scale = min(max(target, scale - step), scale + step)
+        return self.amplitude_scale
+
     # -- output ---------------------------------------------------------------------------------
     @property
     def state(self) -> DriveState:
@@ -375,11 +404,16 @@ class DriveController:
         else:
             self._state = DriveState.IDLE
         enabled = value.amplitude_percent > 0.0
+        amplitude = value.amplitude_percent
+        if not enabled:  # off: the correction is forgotten
+            self.amplitude_scale = self._scale_target = 1.0
+        elif self._slewed_scale(now_s, amplitude) != 1.0:
+            amplitude = min(amplitude * self.amplitude_scale, self.limits.max_amplitude_percent)
         return DriveOutput(
             enabled=enabled,
             frequency_hz=value.frequency_hz,
-            amplitude_percent=value.amplitude_percent if enabled else 0.0,
-            amplitude_n=self.limits.force_n(value.amplitude_percent) if enabled else 0.0,
+            amplitude_percent=amplitude if enabled else 0.0,
+            amplitude_n=self.limits.force_n(amplitude) if enabled else 0.0,
             ramp_time_s=period_s if enabled and not done else 0.0,
             time_s=now_s,
         )

@@ -19,8 +19,12 @@ Its set points go through the same limits and ramps as any other (:meth:`DriveCo
 with target-speed mode kept). Stale feedback holds the tracked centre frequency and amplitude and
 is reported in ``/diagnostics`` (WARN) and ``drive/state`` (``status`` = TRACKING_HOLD).
 
-Length: about 850 lines, the shell of five roles (lifecycle, services, resonance tracking, the two
-backends and their health, part feeding through :mod:`feeder_ros.nodes.drive_feeding`); moving
+Vibration-amplitude regulation (``amplitude.*``, ``set_vibration_amplitude``) is
+:mod:`feeder_ros.nodes.drive_amplitude`, ticked before the controller as part feeding is.
+
+Length: about 870 lines, the shell of six roles (lifecycle, services, resonance tracking, the two
+backends and their health, part feeding through :mod:`feeder_ros.nodes.drive_feeding`, amplitude
+regulation through :mod:`feeder_ros.nodes.drive_amplitude`); moving
 the tracker's coordination and the diagnostic levels into the ROS-free core is issue 30's work,
 which shrinks it below 800.
 """
@@ -61,6 +65,7 @@ from feeder_ros.drive.speed_model import SpeedModel, cached_speed_table, default
 from feeder_ros.identification.speed_model_file import identified_speed_table, load_speed_model
 from feeder_ros.msg import DriveCommand, PartStateArray, SpeedStatus, VehicleEstimate
 from feeder_ros.msg import DriveState as DriveStateMsg
+from feeder_ros.nodes.drive_amplitude import AmplitudeShell
 from feeder_ros.nodes.drive_feeding import Feeding
 from feeder_ros.nodes.drive_interface_parameters import (
     AT_CONFIGURE,
@@ -109,6 +114,7 @@ def check_combination(values: dict[str, Any]) -> None:
     limits = limits_from(values)
     tracker_settings_from(values).check_against(limits)
     check_topic_name(values["tracking.feedback_topic"], "tracking.feedback_topic")
+    check_topic_name(values["amplitude.imu_topic"], "amplitude.imu_topic")
     register_map_from(values)
     plant_from(values)
     level_settings_from(values)
@@ -169,6 +175,7 @@ class DriveInterface(LifecycleNode):
         self.create_service(Trigger, "reset_fault", self._on_reset_fault)
         self.create_service(Trigger, "emergency_stop", self._on_emergency_stop)
         self._feeding = Feeding(self, self._values)
+        self._amplitude = AmplitudeShell(self, self._values)
         # diagnostics in every lifecycle state: an unconfigured drive is worth a WARN too
         self.create_timer(self._values["diagnostics_period_s"], self._publish_diagnostics)
 
@@ -242,6 +249,7 @@ class DriveInterface(LifecycleNode):
             clamp_unreachable_speed=values["unreachable_speed"] == "clamp",
         )
         self._feeding.configure(self._controller, level)
+        self._amplitude.configure(self._controller)
         if values["backend"] == "sim":
             self._command_pub = self.create_publisher(DriveCommand, "drive/command", RELIABLE)
             self._sim_heard = None
@@ -384,6 +392,7 @@ class DriveInterface(LifecycleNode):
         self._tracking_mode = TrackerMode.OFF
         self._speed_feedback.teardown()
         self._feeding.teardown(self._now())
+        self._amplitude.teardown()
         if self._sim_sub is not None:
             self.destroy_subscription(self._sim_sub)
             self._sim_sub = None
@@ -411,9 +420,9 @@ class DriveInterface(LifecycleNode):
             self.get_logger().warning(f"teardown on exit: {error}")
         # a constructor that refused its parameters never made it (Kilted's context still
         # destroys such a node at shutdown)
-        feeding: Feeding | None = getattr(self, "_feeding", None)
-        if feeding is not None:
-            feeding.destroy()
+        for shell in (getattr(self, "_feeding", None), getattr(self, "_amplitude", None)):
+            if shell is not None:
+                shell.destroy()
         super().destroy_node()  # type: ignore[no-untyped-call,unused-ignore]  # untyped on Jazzy
 
     # -- the loop ------------------------------------------------------------------------------
@@ -461,6 +470,7 @@ class DriveInterface(LifecycleNode):
         tracking = self._tracker is not None and self._tracker.mode is not TrackerMode.OFF
         self._speed_feedback.tick(controller, now, tracking)
         self._feeding.tick(controller, now, self._last_output)
+        self._amplitude.tick(controller, now, self._last_output)
         output = controller.tick(now, self._period_s)
         if controller.fault_reason != self._logged_fault:
             # every fault latched here (the heartbeat watchdog, ...) is logged once; a backend
@@ -493,6 +503,7 @@ class DriveInterface(LifecycleNode):
         message.backend = self._values["backend"]
         message.fault_reason = controller.fault_reason
         self._feeding.fill_state(message, controller)
+        self._amplitude.fill_state(message, controller)
         if self._tracker is not None:
             tracking = self._tracker.status(self._now())
             message.status = int(tracking.mode)
@@ -683,7 +694,11 @@ class DriveInterface(LifecycleNode):
             "backend warning": status.warning,
             **status.details,
             **self._feeding.diagnostics(),
+            **self._amplitude.diagnostics(),
         }
+        warning = self._amplitude.warning()
+        if warning and level == DiagnosticStatus.OK:
+            level, summary = DiagnosticStatus.WARN, f"{summary}; amplitude regulation: {warning}"
         if status.actual_frequency_hz is not None:
             values["controller actual_frequency_hz"] = f"{status.actual_frequency_hz:.3f}"
         if status.actual_amplitude_percent is not None:

@@ -1,6 +1,6 @@
 """The drive interface's parameters (ROS free): declarations with units and ranges, defaults, the
 conversions of a parameter dict into the cores' settings (limits, Modbus, plant, tracker, level
-control), and the node's declared interface (topics, services, the action).
+control, amplitude regulation), and the node's declared interface (topics, services, the action).
 
 :mod:`feeder_ros.nodes.drive_interface` declares them on the node; tests, docs and the cell
 description read them from here without starting ROS.
@@ -8,9 +8,11 @@ description read them from here without starting ROS.
 
 from __future__ import annotations
 
+import math
 from dataclasses import replace
 from typing import Any
 
+from feeder_ros.drive.amplitude_regulator import AmplitudeSettings
 from feeder_ros.drive.level_control import LevelSettings
 from feeder_ros.drive.limits import DriveLimits, parse_bands
 from feeder_ros.drive.modbus import ModbusSettings, RegisterMap
@@ -471,6 +473,75 @@ FEEDING_PARAMETERS = (
         60.0,
     ),
 )
+ENABLED, SET_POINT = "amplitude.enabled", "amplitude.set_point_mps2"
+_A = "vibration-amplitude regulation: "
+AMPLITUDE_PARAMETERS = (
+    ParameterSpec(
+        ENABLED,
+        bool,
+        "",
+        _A + "scale the output amplitude (from the set point) to hold the accelerometer's "
+        "drive-frequency line: at amplitude.set_point_mps2, or in target-speed mode at the line "
+        "the speed loops' amplitude gave at takeover; without a set point it only measures "
+        "(applies at once)",
+    ),
+    ParameterSpec(
+        SET_POINT,
+        float,
+        "m/s^2",
+        _A + "the line to hold outside target-speed mode (NaN: none); set_vibration_amplitude "
+        "sets it; refused beyond the measured reach and in target-speed mode",
+        minimum=0.0,
+        exclusive_minimum=True,
+        nan_allowed=True,
+    ),
+    ParameterSpec(
+        "amplitude.imu_topic",
+        str,
+        "",
+        _A + "the carrier's accelerometer (relative: the feeder's namespace)" + _AT_CONFIGURE,
+    ),
+    ParameterSpec(
+        "amplitude.imu_type",
+        str,
+        "",
+        _A + "its type: sensor_msgs/Imu (imu) or feeder_ros/AccelerometerBatch (imu_batch); "
+        "x along the track" + _AT_CONFIGURE,
+        choices=("imu", "imu_batch"),
+    ),
+    *(  # the regulator's settings (AmplitudeSettings); floats: minimum excluded
+        ParameterSpec(
+            f"amplitude.{name}",
+            kind,
+            unit,
+            _A + text + _AT_CONFIGURE,
+            low,
+            high,
+            exclusive_minimum=kind is float,
+        )
+        for name, kind, unit, text, low, high in (
+            ("window_periods", int, "1", "measure over this many drive periods", 2, 100),
+            ("gain", float, "1", "share of the correction applied per window", 0.0, 1.0),
+            ("max_step_percent", float, "%", "largest amplitude step per window", 0.0, 100.0),
+            ("stale_after_s", float, "s", "no window this long: hold, say stale", 0.0, 3600.0),
+        )
+    ),
+)
+_AMPLITUDE = AmplitudeSettings()
+AMPLITUDE_FIELDS = ("window_periods", "gain", "max_step_percent", "stale_after_s")
+AMPLITUDE_DEFAULTS: dict[str, Any] = {
+    ENABLED: False,
+    SET_POINT: math.nan,
+    "amplitude.imu_topic": "imu",
+    "amplitude.imu_type": "imu",
+    **{f"amplitude.{name}": getattr(_AMPLITUDE, name) for name in AMPLITUDE_FIELDS},
+}
+
+
+def amplitude_settings_from(values: dict[str, Any]) -> AmplitudeSettings:
+    return AmplitudeSettings(**{name: values[f"amplitude.{name}"] for name in AMPLITUDE_FIELDS})
+
+
 PLANT_PARAMETERS = tuple(
     replace(
         spec,
@@ -488,6 +559,7 @@ PARAMETERS: dict[str, ParameterSpec] = {
         *NODE_PARAMETERS,
         *SPEED_FEEDBACK_PARAMETERS,
         *FEEDING_PARAMETERS,
+        *AMPLITUDE_PARAMETERS,
         *TRACKING_PARAMETERS,
         *PLANT_PARAMETERS,
     )
@@ -572,6 +644,7 @@ DEFAULTS: dict[str, Any] = {
     "level.sensor_timeout_s": 30.0,
     "feed.starvation_timeout_s": 20.0,
     "feed.feedback_period_s": 0.5,
+    **AMPLITUDE_DEFAULTS,
     "tracking.enabled": False,
     "tracking.feedback_topic": "estimate",
     "tracking.feedback_type": "vehicle_estimate",
@@ -670,7 +743,8 @@ INTERFACE = NodeInterface(
             "reliable, depth 10",
             "state (idle/ramping/running/fault/e-stop), output, set point, fault reason, "
             "resonance tracking (off/active/hold, tracked peak), level control (state, pause "
-            "reason, sensors), feed_parts progress; at publish_rate_hz once configured",
+            "reason, sensors), feed_parts progress, amplitude regulation (set point, measured "
+            "line); at publish_rate_hz once configured",
         ),
         TopicSpec(
             "drive/command",
@@ -716,6 +790,14 @@ INTERFACE = NodeInterface(
             "tracking.feedback_type (or e.g. speed/status, feeder_ros/msg/SpeedStatus); "
             "subscribed at configure",
         ),
+        TopicSpec(
+            "imu",
+            "sensor_msgs/msg/Imu",
+            "best effort, depth 500",
+            "amplitude regulation's carrier accelerometer: amplitude.imu_topic of "
+            "amplitude.imu_type (or e.g. imu/batch, feeder_ros/msg/AccelerometerBatch); "
+            "subscribed at configure",
+        ),
     ),
     services=(
         ServiceSpec("start", "std_srvs/srv/Trigger", "ramp to the set point (needs heartbeat)"),
@@ -729,6 +811,11 @@ INTERFACE = NodeInterface(
             "set_target_speed",
             "feeder_ros/srv/SetTargetSpeed",
             "part speed via the speed model; unreachable: REFUSED with the range (or CLAMPED)",
+        ),
+        ServiceSpec(
+            "set_vibration_amplitude",
+            "feeder_ros/srv/SetVibrationAmplitude",
+            "amplitude regulation's set point [m/s^2]: ACCEPTED / REFUSED with the reachable range",
         ),
         ServiceSpec("reset_fault", "std_srvs/srv/Trigger", "clear a latched fault or e-stop"),
         ServiceSpec(

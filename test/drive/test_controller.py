@@ -368,3 +368,23 @@ def test_start_while_held_answers_paused_and_does_not_drive() -> None:
     assert c.state is DriveState.PAUSED
     c.release(1.0, "level")
     assert c.tick(2.0, 0.02).amplitude_percent == pytest.approx(25.0)
+
+
+def test_amplitude_scale_slews_at_the_rate_limit_is_clamped_and_ends_with_the_output() -> None:
+    c = running_controller(timeout=100.0)
+    c.tick(2.0, 0.02)
+    assert c.tick(2.5, 0.02).amplitude_percent == 50.0
+    c.scale_amplitude(0.8)  # the inner loop wants 40 %: at 25 %/s that takes 0.4 s
+    outputs = [c.tick(2.5 + 0.1 * k, 0.1).amplitude_percent for k in range(1, 7)]
+    assert outputs == pytest.approx([47.5, 45.0, 42.5, 40.0, 40.0, 40.0])
+    assert c.set_point.amplitude_percent == 50.0  # the set point is not the loop's
+    c.scale_amplitude(3.0)  # beyond max_amplitude_percent: the output stops there
+    assert c.tick(20.0, 0.1).amplitude_percent == LIMITS.max_amplitude_percent
+    for bad in (math.nan, -0.5, math.inf):
+        with pytest.raises(ValueError, match=f"amplitude scale {bad!r}"):
+            c.scale_amplitude(bad)
+    c.scale_amplitude(0.8)
+    c.tick(30.0, 0.1)
+    c.emergency_stop(30.0)
+    assert not c.tick(30.1, 0.1).enabled
+    assert c.amplitude_scale == 1.0  # an output that went off forgets the correction
