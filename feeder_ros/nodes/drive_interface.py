@@ -15,18 +15,15 @@ Resonance tracking (``tracking.enabled``): in target-speed mode, while running, 
 and moves the frequency onto the measured part-speed peak (square frequency dither, extremum
 seeking) while trimming the amplitude to hold the target speed, from the part speed on
 ``tracking.feedback_topic`` (the estimator's ``estimate`` or the speed monitor's ``speed/status``).
-Its set points go through the same limits and ramps as any other (:meth:`DriveController.set_drive`,
-with target-speed mode kept). Stale feedback holds the tracked centre frequency and amplitude and
-is reported in ``/diagnostics`` (WARN) and ``drive/state`` (``status`` = TRACKING_HOLD).
+When it runs and how its set points reach the controller is
+:class:`feeder_ros.drive.tracked_control.TrackedControl` (ROS-free). Stale feedback holds the
+tracked centre frequency and amplitude and is reported in ``/diagnostics`` (WARN) and
+``drive/state`` (``status`` = TRACKING_HOLD). The diagnostics' level and summary are
+:func:`feeder_ros.drive.health.drive_health`.
 
-Vibration-amplitude regulation (``amplitude.*``, ``set_vibration_amplitude``) is
-:mod:`feeder_ros.nodes.drive_amplitude`, ticked before the controller as part feeding is.
-
-Length: about 870 lines, the shell of six roles (lifecycle, services, resonance tracking, the two
-backends and their health, part feeding through :mod:`feeder_ros.nodes.drive_feeding`, amplitude
-regulation through :mod:`feeder_ros.nodes.drive_amplitude`); moving
-the tracker's coordination and the diagnostic levels into the ROS-free core is issue 30's work,
-which shrinks it below 800.
+Part feeding (level control, ``feed_parts``) is :mod:`feeder_ros.nodes.drive_feeding`,
+vibration-amplitude regulation (``amplitude.*``, ``set_vibration_amplitude``)
+:mod:`feeder_ros.nodes.drive_amplitude`, both ticked before the controller.
 """
 
 from __future__ import annotations
@@ -37,7 +34,7 @@ import time
 from pathlib import Path
 from typing import TYPE_CHECKING, Any
 
-from diagnostic_msgs.msg import DiagnosticArray, DiagnosticStatus, KeyValue
+from diagnostic_msgs.msg import DiagnosticArray
 from rcl_interfaces.msg import SetParametersResult
 from rclpy.duration import Duration
 from rclpy.exceptions import InvalidTopicNameException
@@ -51,20 +48,17 @@ from std_srvs.srv import Trigger
 
 from feeder_ros.drive.backend import BackendStatus, DriveBackend, DriveOutput, SimBackend
 from feeder_ros.drive.controller import DriveController, DriveState
+from feeder_ros.drive.health import Level, drive_health
 from feeder_ros.drive.level_control import LevelControl
 from feeder_ros.drive.limits import DriveLimits, Outcome
 from feeder_ros.drive.modbus import ModbusTcpBackend
-from feeder_ros.drive.resonance_tracker import (
-    FUTURE_STAMP_TOLERANCE_S,
-    ResonanceTracker,
-    TrackerCommand,
-    TrackerMode,
-    TrackerStatus,
-)
+from feeder_ros.drive.resonance_tracker import FUTURE_STAMP_TOLERANCE_S, TrackerMode
 from feeder_ros.drive.speed_model import SpeedModel, cached_speed_table, default_cache_dir
+from feeder_ros.drive.tracked_control import TrackedControl, apply_loop_point
 from feeder_ros.identification.speed_model_file import identified_speed_table, load_speed_model
 from feeder_ros.msg import DriveCommand, PartStateArray, SpeedStatus, VehicleEstimate
 from feeder_ros.msg import DriveState as DriveStateMsg
+from feeder_ros.nodes.diagnostics import diagnostic_array, diagnostic_status
 from feeder_ros.nodes.drive_amplitude import AmplitudeShell
 from feeder_ros.nodes.drive_feeding import Feeding
 from feeder_ros.nodes.drive_interface_parameters import (
@@ -125,8 +119,6 @@ def check_combination(values: dict[str, Any]) -> None:
         )
 
 
-_STATE_NAMES = {state: state.name.lower() for state in DriveState}
-_TRACKING_NAMES = {mode: mode.name.lower() for mode in TrackerMode}
 FEEDBACK_QOS = QoSProfile(depth=100, reliability=ReliabilityPolicy.RELIABLE)
 
 
@@ -152,15 +144,12 @@ class DriveInterface(LifecycleNode):
         self._speed_source = "none"
         self._command_pub: Any = None
         self._loop_timers: list[Any] = []
-        self._tracker: ResonanceTracker | None = None
+        self._tracked: TrackedControl | None = None
         self._feedback_sub: Any = None
         self._sim_sub: Any = None  # sim backend: the simulator's parts/state (a sign of life)
         self._sim_heard: float | None = None  # time.monotonic() of its last message
         self._sim_stalls: StallDetector | None = None
         self._sim_listening = 0.0  # time.monotonic() since this node listens (after a stall)
-        self._tracking_note = "not configured"  # why tracking is not active
-        self._tracking_refused: tuple[float, float, float] | None = None  # start point refused
-        self._tracking_mode = TrackerMode.OFF  # as last logged
         self._speed_feedback = SpeedFeedback(self, self._values, self._apply_point)
         self._last_output = DriveOutput(False, 0.0, 0.0, 0.0)
         # plain publishers: they exist unconfigured, and keep publishing the ramp to zero after
@@ -216,21 +205,22 @@ class DriveInterface(LifecycleNode):
             controller.clamp_unreachable_speed = self._values["unreachable_speed"] == "clamp"
         if any(name.startswith("speed_trim.") for name in changed):
             self._speed_feedback.settings_changed()
-        tracker = self._tracker
-        if tracker is None:
+        tracked = self._tracked
+        if tracked is None:
             return
         now = self._now()
-        self._tracking_refused = None  # new settings or limits: a refused start may work now
-        if changed & {f"tracking.{name}" for name in TRACKER_FIELDS}:
-            command = tracker.update_settings(tracker_settings_from(self._values), now)
-            if command is not None:
-                self._apply_tracker(controller, now, command)
-        if changed & {spec.name for spec in LIMIT_PARAMETERS}:
-            command = tracker.update_limits(limits_from(self._values), now)
-            if command is not None:
-                self._apply_tracker(controller, now, command)
-        if "tracking.enabled" in changed and not self._values["tracking.enabled"]:
-            self._stop_tracker(controller, now, "tracking.enabled is false", hold=True)
+        tracked.enabled = bool(self._values["tracking.enabled"])
+        limits_changed = bool(changed & {spec.name for spec in LIMIT_PARAMETERS})
+        settings_changed = bool(changed & {f"tracking.{name}" for name in TRACKER_FIELDS})
+        if settings_changed or limits_changed:
+            tracked.settings_changed(
+                controller,
+                now,
+                tracker_settings_from(self._values) if settings_changed else None,
+                limits_from(self._values) if limits_changed else None,
+            )
+        if "tracking.enabled" in changed and not tracked.enabled:
+            tracked.stop(controller, now, "tracking.enabled is false", hold=True)
 
     # -- lifecycle -----------------------------------------------------------------------------
     def on_configure(self, state: LifecycleState) -> TransitionCallbackReturn:
@@ -280,9 +270,8 @@ class DriveInterface(LifecycleNode):
             plant_from(values),
             (lambda plant: self._speed_table(plant, values, limits)) if table else None,
         )
-        self._tracker = ResonanceTracker(tracker_settings_from(values), limits)
-        self._tracking_refused = None
-        self._tracking_note = "waiting for target-speed mode"
+        self._tracked = TrackedControl(tracker_settings_from(values), limits, self._log)
+        self._tracked.enabled = bool(values["tracking.enabled"])
         if values["tracking.feedback_type"] == "vehicle_estimate":
             self._feedback_sub = self.create_subscription(
                 VehicleEstimate, values["tracking.feedback_topic"], self._on_estimate, FEEDBACK_QOS
@@ -387,9 +376,7 @@ class DriveInterface(LifecycleNode):
         for timer in self._loop_timers:
             self.destroy_timer(timer)
         self._loop_timers = []
-        self._tracker = None
-        self._tracking_note = "not configured"
-        self._tracking_mode = TrackerMode.OFF
+        self._tracked = None
         self._speed_feedback.teardown()
         self._feeding.teardown(self._now())
         self._amplitude.teardown()
@@ -466,9 +453,10 @@ class DriveInterface(LifecycleNode):
                 self.get_logger().debug(f"backend fault: {status.fault}")
             else:
                 self.get_logger().info("backend fault cleared (reset_fault to resume)")
-        self._run_tracker(controller, now)
-        tracking = self._tracker is not None and self._tracker.mode is not TrackerMode.OFF
-        self._speed_feedback.tick(controller, now, tracking)
+        tracked = self._tracked
+        if tracked is not None:
+            tracked.tick(controller, now)
+        self._speed_feedback.tick(controller, now, tracked is not None and tracked.active)
         self._feeding.tick(controller, now, self._last_output)
         self._amplitude.tick(controller, now, self._last_output)
         output = controller.tick(now, self._period_s)
@@ -504,8 +492,8 @@ class DriveInterface(LifecycleNode):
         message.fault_reason = controller.fault_reason
         self._feeding.fill_state(message, controller)
         self._amplitude.fill_state(message, controller)
-        if self._tracker is not None:
-            tracking = self._tracker.status(self._now())
+        if self._tracked is not None:
+            tracking = self._tracked.status(self._now())
             message.status = int(tracking.mode)
             message.tracked_frequency_hz = tracking.centre_frequency_hz
             message.tracked_amplitude_percent = tracking.amplitude_percent
@@ -518,77 +506,15 @@ class DriveInterface(LifecycleNode):
         self._state_pub.publish(message)
 
     # -- resonance tracking --------------------------------------------------------------------
-    def _tracking_blocker(self, controller: DriveController) -> str:
-        """Why tracking may not run now ("" when it may)."""
-        if not self._values["tracking.enabled"]:
-            return "tracking.enabled is false"
-        if not controller.active:
-            return "drive interface not active"
-        if controller.fault_reason:
-            return f"latched: {controller.fault_reason}"
-        if not controller.speed_mode:
-            return "not in target-speed mode (set_target_speed)"
-        if not controller.running:
-            return "not running (start)"
-        return ""
-
-    def _run_tracker(self, controller: DriveController, now: float) -> None:
-        tracker = self._tracker
-        if tracker is None:
-            return
-        blocker = self._tracking_blocker(controller)
-        if blocker:
-            # stopped or faulted in target-speed mode: the tracked point becomes the stored set
-            # point (a later start resumes from the peak); set_drive left speed mode: no hold
-            self._stop_tracker(controller, now, blocker, hold=controller.speed_mode)
-            self._tracking_note = blocker
-            return
-        command: TrackerCommand | None
-        if tracker.mode is TrackerMode.OFF:
-            point = controller.set_point
-            start = (point.frequency_hz, point.amplitude_percent, controller.target_speed_mps)
-            if start == self._tracking_refused:
-                return
-            command = tracker.start(now, *start, ready_s=now + controller.ramp.remaining_s(now))
-            if command is None:
-                self._tracking_refused = start
-                self._tracking_note = tracker.status(now).reason
-                self.get_logger().warning(f"resonance tracking cannot start: {self._tracking_note}")
-                return
-            self._tracking_refused = None
-            self._tracking_note = ""
-            self.get_logger().info(
-                f"resonance tracking started at {point.frequency_hz:.3f} Hz, "
-                f"{point.amplitude_percent:.2f} % for {controller.target_speed_mps:g} m/s"
-            )
+    def _log(self, severity: str, text: str) -> None:
+        """The ROS-free cores' log lines ("repeating": a warning that may come every tick)."""
+        logger = self.get_logger()
+        if severity == "info":
+            logger.info(text)
+        elif severity == "repeating":
+            logger.warning(text, throttle_duration_sec=5.0)
         else:
-            command = tracker.update(now)
-        if command is not None:
-            self._apply_tracker(controller, now, command)
-        self._log_tracking_mode(now)
-
-    def _stop_tracker(
-        self, controller: DriveController, now: float, reason: str, hold: bool
-    ) -> None:
-        tracker = self._tracker
-        if tracker is None:
-            return
-        command = tracker.stop(reason)
-        if command is not None:
-            self.get_logger().info(
-                f"resonance tracking stopped ({reason}) at {command.frequency_hz:.3f} Hz, "
-                f"{command.amplitude_percent:.2f} %"
-            )
-            if hold and controller.active and not controller.fault_reason:
-                self._apply_tracker(controller, now, command)
-        self._log_tracking_mode(now)
-
-    def _apply_tracker(
-        self, controller: DriveController, now: float, command: TrackerCommand
-    ) -> None:
-        self._apply_point(
-            controller, now, command.frequency_hz, command.amplitude_percent, "resonance tracking"
-        )
+            logger.warning(text)
 
     def _apply_point(
         self,
@@ -598,43 +524,26 @@ class DriveInterface(LifecycleNode):
         amplitude_percent: float,
         who: str,
     ) -> None:
-        """A loop's set point through the controller's own checks, limits and ramps, with
-        target-speed mode (and its target) kept."""
-        speed_mode, target = controller.speed_mode, controller.target_speed_mps
-        answer = controller.set_drive(now, frequency_hz, amplitude_percent, 0.0)
-        controller.speed_mode, controller.target_speed_mps = speed_mode, target
+        answer = apply_loop_point(controller, now, frequency_hz, amplitude_percent)
         if answer.outcome is Outcome.REFUSED:
-            self.get_logger().warning(
-                f"{who} set point refused: {answer.reason}", throttle_duration_sec=5.0
-            )
-
-    def _log_tracking_mode(self, now: float) -> None:
-        tracker = self._tracker
-        if tracker is None or tracker.mode is self._tracking_mode:
-            return
-        previous, self._tracking_mode = self._tracking_mode, tracker.mode
-        status = tracker.status(now)
-        if status.mode is TrackerMode.HOLD:
-            self.get_logger().warning(f"resonance tracking: {status.reason}")
-        elif previous is TrackerMode.HOLD and status.mode is TrackerMode.ACTIVE:
-            self.get_logger().info("resonance tracking: speed feedback back, tracking again")
+            self._log("repeating", f"{who} set point refused: {answer.reason}")
 
     def _on_estimate(self, message: VehicleEstimate) -> None:
-        if self._tracker is None:
+        if self._tracked is None:
             return
         if not message.mean_speed_confidence >= self._values["tracking.min_confidence"]:
             return  # an estimate without enough information is no reading
         self._feedback(message.header.stamp, message.mean_speed_mps, "estimate")
 
     def _on_speed_status(self, message: SpeedStatus) -> None:
-        if self._tracker is None:
+        if self._tracked is None:
             return
         self._feedback(message.header.stamp, message.estimated_speed_mps, "speed_status")
 
     def _feedback(self, stamp: Any, speed_mps: float, topic: str) -> None:
         """A speed reading for the tracker; one stamped far ahead of this node's clock is ignored
         (by the tracker) with a warning: it would keep tracking ACTIVE with no fresh reading."""
-        assert self._tracker is not None
+        assert self._tracked is not None
         self._feeding.speed_mps = speed_mps
         now = self._now()
         t_s = _stamp_s(stamp) or now
@@ -645,13 +554,13 @@ class DriveInterface(LifecycleNode):
                 "nodes use the same clock (use_sim_time)?",
                 throttle_duration_sec=5.0,
             )
-        self._tracker.feedback(t_s, speed_mps)
+        self._tracked.feedback(t_s, speed_mps)
 
     def _publish_diagnostics(self) -> None:
         controller, backend = self._controller, self._backend
         if controller is None or backend is None:
             self._publish_status(
-                DiagnosticStatus.WARN,
+                Level.WARN,
                 "unconfigured: output off",
                 "none",
                 {"lifecycle": "unconfigured or finalized"},
@@ -660,22 +569,17 @@ class DriveInterface(LifecycleNode):
         status: BackendStatus = backend.status()
         now = self._now()
         age = controller.watchdog.age_s(now)
-        level, summary = DiagnosticStatus.OK, _STATE_NAMES[controller.state]
-        if controller.state in (DriveState.FAULT, DriveState.ESTOP):
-            level, summary = DiagnosticStatus.ERROR, f"{summary}: {controller.fault_reason}"
-        elif status.fault:
-            level, summary = DiagnosticStatus.ERROR, f"backend: {status.fault}"
-        elif not status.connected:
-            level, summary = DiagnosticStatus.WARN, "backend not connected"
-        elif status.warning:
-            level, summary = DiagnosticStatus.WARN, f"{summary}; backend: {status.warning}"
-        elif not controller.watchdog.alive(now):
-            level, summary = DiagnosticStatus.WARN, f"{summary}; no heartbeat"
-        elif controller.paused:
-            summary = f"{summary}: {controller.hold_reason}"
+        tracked = self._tracked
+        health = drive_health(
+            controller,
+            status,
+            now,
+            self._amplitude.warning(),
+            tracked.status(now) if tracked is not None else None,
+        )
         out = self._last_output
         values = {
-            "state": _STATE_NAMES[controller.state],
+            "state": controller.state.name.lower(),
             "active": str(controller.active),
             "output enabled": str(out.enabled),
             "frequency_hz": f"{out.frequency_hz:.3f}",
@@ -696,65 +600,24 @@ class DriveInterface(LifecycleNode):
             **self._feeding.diagnostics(),
             **self._amplitude.diagnostics(),
         }
-        warning = self._amplitude.warning()
-        if warning and level == DiagnosticStatus.OK:
-            level, summary = DiagnosticStatus.WARN, f"{summary}; amplitude regulation: {warning}"
         if status.actual_frequency_hz is not None:
             values["controller actual_frequency_hz"] = f"{status.actual_frequency_hz:.3f}"
         if status.actual_amplitude_percent is not None:
             values["controller actual_amplitude_percent"] = f"{status.actual_amplitude_percent:.3f}"
-        if not controller.active and level == DiagnosticStatus.OK:
-            level, summary = DiagnosticStatus.WARN, f"inactive: {summary}"
-        if self._tracker is not None:
-            tracking = self._tracker.status(now)
-            values.update(self._tracking_values(tracking))
-            if tracking.mode is TrackerMode.HOLD and level == DiagnosticStatus.OK:
-                level = DiagnosticStatus.WARN
-                summary = f"{summary}; resonance tracking holding: speed feedback stale"
-            elif (
-                tracking.mode is TrackerMode.ACTIVE
-                and tracking.amplitude_limited
-                and level == DiagnosticStatus.OK
-            ):
-                level = DiagnosticStatus.WARN
-                summary = f"{summary}; resonance tracking: amplitude at its limit"
-        self._publish_status(level, summary, backend.name, values)
-
-    def _tracking_values(self, tracking: TrackerStatus) -> dict[str, str]:
-        mode = _TRACKING_NAMES[tracking.mode]
-        note = tracking.reason if tracking.mode is not TrackerMode.OFF else self._tracking_note
-        age = tracking.feedback_age_s
-        return {
-            "resonance tracking": f"{mode}: {note}" if note else mode,
-            "tracking feedback": (
+        if tracked is not None:
+            feedback = (
                 f"{self.resolve_topic_name(self._values['tracking.feedback_topic'])} "
                 f"({self._values['tracking.feedback_type']})"
-            ),
-            "tracked_frequency_hz": f"{tracking.centre_frequency_hz:.3f}",
-            "tracked_amplitude_percent": f"{tracking.amplitude_percent:.3f}",
-            "tracking measured_speed_mps": f"{tracking.measured_speed_mps:.6g}",
-            "tracking relative gradient 1/Hz": f"{tracking.gradient_per_hz:.4g}",
-            "tracking relative speed error": f"{tracking.speed_error:.4g}",
-            "tracking cycles": str(tracking.cycles),
-            "tracking feedback age s": "never" if math.isinf(age) else f"{age:.3f}",
-            "tracking amplitude limited": str(tracking.amplitude_limited),
-        }
+            )
+            values.update(tracked.values(now, feedback))
+        self._publish_status(health.level, health.summary, backend.name, values)
 
     def _publish_status(
-        self, level: bytes, summary: str, hardware_id: str, values: dict[str, str]
+        self, level: int, summary: str, hardware_id: str, values: dict[str, str]
     ) -> None:
-        array = DiagnosticArray()
-        array.header.stamp = self.get_clock().now().to_msg()
-        array.status.append(
-            DiagnosticStatus(
-                level=level,
-                name=f"{self.get_fully_qualified_name()}: drive",
-                message=summary,
-                hardware_id=hardware_id,
-                values=[KeyValue(key=k, value=v) for k, v in values.items()],
-            )
-        )
-        self._diagnostics_pub.publish(array)
+        name = f"{self.get_fully_qualified_name()}: drive"
+        status = diagnostic_status(name, level, summary, hardware_id, values)
+        self._diagnostics_pub.publish(diagnostic_array(self.get_clock().now().to_msg(), status))
 
     # -- inputs --------------------------------------------------------------------------------
     def _on_heartbeat(self, message: Header) -> None:
@@ -840,10 +703,9 @@ class DriveInterface(LifecycleNode):
             self._now(), request.speed_mps, request.ramp_time_s
         )
         reason = answer.reason
-        if answer.outcome is not Outcome.REFUSED and self._tracker is not None:
+        if answer.outcome is not Outcome.REFUSED and self._tracked is not None:
             # a new target: tracking restarts from the speed model's set point at the next tick
-            self._tracker.stop("new target speed")
-            self._tracking_refused = None
+            self._tracked.new_target()
             if self._values["tracking.enabled"]:
                 note = "resonance tracking refines frequency and amplitude from this set point"
                 reason = f"{reason}; {note}" if reason else note
