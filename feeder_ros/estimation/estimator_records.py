@@ -29,6 +29,7 @@ __all__ = [
     "WindowStatistics",
     "confidence",
     "empty_trace",
+    "input_health",
 ]
 
 F64 = npt.NDArray[np.float64]
@@ -254,3 +255,34 @@ class Columns:
 
     def clear(self) -> None:
         self._start = self._end = 0
+
+
+#: estimate statuses that make the estimator's diagnostics WARN (the estimate is not usable now)
+WARN_STATUSES = frozenset(
+    {Status.GAP, Status.INVALID_SAMPLES, Status.OUT_OF_ORDER, Status.DRIVE_CHANGED, Status.SETTLING}
+)
+
+
+def input_health(
+    received: int,
+    silent_s: float,
+    waited_s: float,
+    startup_timeout_s: float,
+    input_timeout_s: float,
+    status: Status,
+    status_message: str,
+) -> tuple[int, str]:
+    """The estimator's health for ``/diagnostics``: (level 0 OK / 1 WARN / 2 ERROR, message).
+
+    No sample yet: WARN while waiting, ERROR after ``startup_timeout_s``; samples that stopped
+    for ``input_timeout_s``: ERROR (sensor timeout); an estimate that is not usable now (a gap,
+    invalid or out-of-order samples, a drive change, settling): WARN with its message."""
+    if received == 0:
+        if silent_s > startup_timeout_s:
+            return 2, f"no accelerometer sample in {waited_s:.1f} s since start"
+        return 1, f"waiting for the first accelerometer sample ({waited_s:.1f} s since start)"
+    if silent_s > input_timeout_s:
+        return 2, f"sensor timeout: no accelerometer sample for {silent_s:.1f} s"
+    if status in WARN_STATUSES:
+        return 1, status_message or status.name
+    return 0, "estimating"

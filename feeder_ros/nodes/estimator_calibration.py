@@ -20,7 +20,7 @@ import threading
 from collections.abc import Callable
 from typing import Any
 
-from diagnostic_msgs.msg import DiagnosticStatus, KeyValue
+from diagnostic_msgs.msg import DiagnosticStatus
 from rclpy.node import Node
 from rclpy.qos import DurabilityPolicy, QoSProfile, ReliabilityPolicy
 from std_srvs.srv import Trigger
@@ -37,6 +37,7 @@ from feeder_ros.estimation.stick_slip_observer import PartModel
 from feeder_ros.estimation.vehicle_estimator import VehicleEstimator
 from feeder_ros.msg import PartCalibration, PartSensorEvent
 from feeder_ros.node_interfaces import ServiceSpec, TopicSpec
+from feeder_ros.nodes.diagnostics import diagnostic_status
 from feeder_ros.physics.parameters import ParameterError, ParameterSpec
 from feeder_ros.srv import SetMeasuredSpeed
 
@@ -395,13 +396,13 @@ class EstimatorCalibration:
         be used or written and for a refused measurement (until the next accepted one)."""
         belief = self._calibrator.belief
         std = belief.std
-        level, text = DiagnosticStatus.OK, self._message
+        level, text = 0, self._message
         if not self._enabled:
             text = "disabled: nominal part"
         elif self._file_problem:
-            level, text = DiagnosticStatus.WARN, self._file_problem
+            level, text = 1, self._file_problem
         elif self._message.startswith("refused:"):
-            level = DiagnosticStatus.WARN
+            level = 1
         values = {
             "static_friction": f"{belief.static_friction:.4g}",
             "kinetic_friction": f"{belief.kinetic_friction:.4g}",
@@ -414,10 +415,4 @@ class EstimatorCalibration:
             "measurements_refused": str(self._refused),
             "file": self._file or "(none)",
         }
-        return DiagnosticStatus(
-            name=name,
-            hardware_id="part model",
-            level=level,
-            message=text,
-            values=[KeyValue(key=k, value=v) for k, v in values.items()],
-        )
+        return diagnostic_status(name, level, text, "part model", values)

@@ -16,7 +16,7 @@ import threading
 import time
 from typing import TYPE_CHECKING, Any
 
-from diagnostic_msgs.msg import DiagnosticArray, DiagnosticStatus, KeyValue
+from diagnostic_msgs.msg import DiagnosticArray
 from rclpy.node import Node
 from rclpy.qos import QoSProfile, ReliabilityPolicy
 
@@ -30,6 +30,7 @@ from feeder_ros.msg import (
     VehicleEstimate,
 )
 from feeder_ros.node_interfaces import NodeInterface, TopicSpec
+from feeder_ros.nodes.diagnostics import diagnostic_array, diagnostic_status
 from feeder_ros.nodes.ros_parameters import declare_parameters, validator
 from feeder_ros.nodes.runner import run_node
 from feeder_ros.nodes.stall_detector import StallDetector
@@ -322,15 +323,9 @@ class SpeedMonitorNode(Node):
             **status.details,
             "stalls_seen": str(self._stalls.stalls),
         }
-        diagnostic = DiagnosticStatus(
-            name=f"{self.get_fully_qualified_name()}: part speed",
-            hardware_id="feeder track",
-            level=bytes([status.level]),
-            message=status.message,
-            values=[KeyValue(key=k, value=v) for k, v in values.items()],
-        )
-        array = DiagnosticArray(status=[diagnostic])
-        array.header = message.header
+        name = f"{self.get_fully_qualified_name()}: part speed"
+        diagnostic = diagnostic_status(name, status.level, status.message, "feeder track", values)
+        array = diagnostic_array(message.header.stamp, diagnostic)
         self._diagnostics_pub.publish(array)
 
 

@@ -21,24 +21,25 @@ import time
 from typing import TYPE_CHECKING, Any
 
 import numpy as np
-from diagnostic_msgs.msg import DiagnosticArray, DiagnosticStatus, KeyValue
+from diagnostic_msgs.msg import DiagnosticArray
 from rclpy.exceptions import InvalidHandle
 from rclpy.node import Node
 from rclpy.qos import QoSProfile, ReliabilityPolicy
 from rclpy.qos_overriding_options import QoSOverridingOptions
 from sensor_msgs.msg import Imu
 
+from feeder_ros.estimation.estimator_records import input_health
 from feeder_ros.estimation.part_belief import PartBelief
 from feeder_ros.estimation.stick_slip_observer import PartModel
 from feeder_ros.estimation.vehicle_estimator import (
     EstimatorConfig,
-    Status,
     VehicleEstimator,
 )
 from feeder_ros.estimation.vehicle_estimator import VehicleEstimate as EstimateRecord
 from feeder_ros.msg import AccelerometerBatch, CarrierState, DriveCommand, VehicleEstimate
 from feeder_ros.node_interfaces import NodeInterface, TopicSpec
 from feeder_ros.nodes import estimator_calibration as calibration
+from feeder_ros.nodes.diagnostics import diagnostic_array, diagnostic_status
 from feeder_ros.nodes.estimator_calibration import EstimatorCalibration, measurement_source
 from feeder_ros.nodes.ros_parameters import declare_parameters, validator
 from feeder_ros.nodes.runner import run_node
@@ -207,15 +208,6 @@ INTERFACE = NodeInterface(
     services=calibration.SERVICES,
     parameters=PARAMETERS,
 )
-
-_WARN_STATUSES = {
-    Status.GAP,
-    Status.INVALID_SAMPLES,
-    Status.OUT_OF_ORDER,
-    Status.DRIVE_CHANGED,
-    Status.SETTLING,
-}
-
 
 _IMU_AFTER_HEADER = 8 * (4 + 9 + 3 + 9)  # orientation, its covariance, angular velocity, its cov.
 
@@ -502,20 +494,15 @@ class VehicleEstimatorNode(Node):
             silent_s = (now - since).nanoseconds * 1e-9
             waited_s = (now - self._last_input).nanoseconds * 1e-9  # since start, if none came
             received = self._received
-        if received == 0:
-            if silent_s > self._values["startup_timeout_s"]:
-                level = DiagnosticStatus.ERROR
-                text = f"no accelerometer sample in {waited_s:.1f} s since start"
-            else:
-                level = DiagnosticStatus.WARN
-                text = f"waiting for the first accelerometer sample ({waited_s:.1f} s since start)"
-        elif silent_s > self._values["input_timeout_s"]:
-            level = DiagnosticStatus.ERROR
-            text = f"sensor timeout: no accelerometer sample for {silent_s:.1f} s"
-        elif record.status in _WARN_STATUSES:
-            level, text = DiagnosticStatus.WARN, record.status_message or record.status.name
-        else:
-            level, text = DiagnosticStatus.OK, "estimating"
+        level, text = input_health(
+            received,
+            silent_s,
+            waited_s,
+            self._values["startup_timeout_s"],
+            self._values["input_timeout_s"],
+            record.status,
+            record.status_message,
+        )
         values = {
             "status": record.status.name,
             "status_message": record.status_message,
@@ -527,18 +514,12 @@ class VehicleEstimatorNode(Node):
             "slip_fraction": f"{record.slip_fraction:.4g}",
             "stalls_seen": str(self._stalls.stalls),
         }
-        status = DiagnosticStatus(
-            name=f"{self.get_fully_qualified_name()}: estimate",
-            hardware_id="carrier accelerometer",
-            level=level,
-            message=text,
-            values=[KeyValue(key=k, value=v) for k, v in values.items()],
+        name = self.get_fully_qualified_name()
+        status = diagnostic_status(
+            f"{name}: estimate", level, text, "carrier accelerometer", values
         )
-        part_model = self._calibration.diagnostic_status(
-            f"{self.get_fully_qualified_name()}: part model"
-        )
-        array = DiagnosticArray(status=[status, part_model])
-        array.header.stamp = self.get_clock().now().to_msg()
+        part_model = self._calibration.diagnostic_status(f"{name}: part model")
+        array = diagnostic_array(self.get_clock().now().to_msg(), status, part_model)
         self._diagnostics.publish(array)
 
 
