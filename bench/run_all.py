@@ -21,6 +21,7 @@ BENCHMARKS = [
     ("The estimator on mismatched feeders, before and after calibration", "eval_mismatch.py"),
     ("Live nodes over DDS (issue 4)", "bench_live.py"),
     ("Bag decoding and feeder analyze (issue 6)", "bench_bag.py"),
+    ("Parts on request: feed_parts against continuous running (issue 34)", "bench_feed_parts.py"),
 ]
 
 
