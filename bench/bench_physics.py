@@ -45,6 +45,7 @@ REPO = Path(__file__).resolve().parents[1]
 if str(REPO) not in sys.path:
     sys.path.insert(0, str(REPO))
 
+import feeder_ros.physics.live_simulator as live_simulator  # noqa: E402
 import feeder_ros.physics.simulation as simulation  # noqa: E402
 from feeder_ros.physics.parameters import FeederParameters  # noqa: E402
 from feeder_ros.physics.simulation import (  # noqa: E402
@@ -472,8 +473,8 @@ def live_ticks(ticks: int, forget_after: int) -> tuple[float, float, int]:
     """A live run of ``ticks`` 20 ms ticks, each with a command ramped over the tick (what the
     drive interface sends while ramping or tracking); returns the mean wall time per tick over the
     first and the last 10 % of the ticks and the drive changes kept at the end."""
-    kept = simulation.FORGET_DRIVE_CHANGES_AFTER
-    simulation.FORGET_DRIVE_CHANGES_AFTER = forget_after
+    kept = live_simulator.FORGET_DRIVE_CHANGES_AFTER
+    live_simulator.FORGET_DRIVE_CHANGES_AFTER = forget_after
     try:
         sim = FeederSimulator(FeederParameters(damping_ns_per_m=200.0), parts=(PartSpec(),))
         grid = np.arange(1, 21) * 1e-3
@@ -485,7 +486,7 @@ def live_ticks(ticks: int, forget_after: int) -> tuple[float, float, int]:
             sim.advance(now + 0.02, now + grid)
             walls[k] = time.perf_counter() - started
     finally:
-        simulation.FORGET_DRIVE_CHANGES_AFTER = kept
+        live_simulator.FORGET_DRIVE_CHANGES_AFTER = kept
     tenth = max(ticks // 10, 1)
     return float(walls[:tenth].mean()), float(walls[-tenth:].mean()), len(sim.drive.changes)
 
@@ -498,9 +499,9 @@ def live_drive(ticks: int) -> list[str]:
         "changes kept at the end |",
         "| --- | ---: | ---: | ---: | ---: |",
     ]
-    live_ticks(20, simulation.FORGET_DRIVE_CHANGES_AFTER)  # first calls (caches) not timed
+    live_ticks(20, live_simulator.FORGET_DRIVE_CHANGES_AFTER)  # first calls (caches) not timed
     for label, forget_after in (
-        ("forgets past changes (engine)", simulation.FORGET_DRIVE_CHANGES_AFTER),
+        ("forgets past changes (engine)", live_simulator.FORGET_DRIVE_CHANGES_AFTER),
         ("keeps every change (baseline)", 1 << 62),
     ):
         first, last, kept = live_ticks(ticks, forget_after)

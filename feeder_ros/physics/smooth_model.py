@@ -24,7 +24,7 @@ import itertools
 import math
 from collections.abc import Callable, Sequence
 from dataclasses import dataclass
-from typing import TYPE_CHECKING, Any, Literal
+from typing import Any, Literal
 
 import numpy as np
 from numpy.typing import NDArray
@@ -34,9 +34,7 @@ from scipy.special import expit
 
 from feeder_ros.physics.drive import DriveSchedule
 from feeder_ros.physics.parameters import FeederParameters
-
-if TYPE_CHECKING:
-    from feeder_ros.physics.simulation import PartSpec, SimulationResult
+from feeder_ros.physics.results import EventKind, EventLog, PartSpec, Phase, SimulationResult
 
 __all__ = [
     "LogisticCarrier",
@@ -53,7 +51,7 @@ ForceFunction = Callable[[FloatArray], FloatArray]
 ScalarForce = Callable[[float], float]
 SolverMethod = Literal["RK23", "RK45", "DOP853", "Radau", "BDF", "LSODA"]
 
-# Phase codes (feeder_ros.physics.simulation.Phase)
+# Phase codes (feeder_ros.physics.results.Phase)
 EXITED, STICK, SLIP_FORWARD, SLIP_BACKWARD = -1, 0, 1, 2
 
 
@@ -539,8 +537,6 @@ def simulate_smooth(
     (+1 where ``K`` is nearer ``K_f``); ``BRANCH_SWITCH`` events are its sign changes. ``options``
     picks the ``solve_ivp`` method and tolerances (default :class:`SolverOptions`).
     """
-    from feeder_ros.physics.simulation import EventKind, EventLog, Phase, SimulationResult
-
     if not (output_rate_hz > 0.0 and math.isfinite(output_rate_hz)):
         raise ValueError(f"output_rate_hz={output_rate_hz!r} must be positive and finite")
     if not (duration_s > 0.0 and math.isfinite(duration_s)):

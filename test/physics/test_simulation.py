@@ -10,6 +10,7 @@ import numpy as np
 import pytest
 
 from feeder_ros.physics.drive import DriveSchedule
+from feeder_ros.physics.group_tables import _output_arrays
 from feeder_ros.physics.parameters import FeederParameters, ParameterError
 from feeder_ros.physics.simulation import (
     EventKind,
@@ -17,7 +18,6 @@ from feeder_ros.physics.simulation import (
     PartSpec,
     Phase,
     SimulationError,
-    _output_arrays,
     limited_threads,
     simulate,
     simulate_carrier,
@@ -224,12 +224,12 @@ def _live_run(
 def test_a_live_drive_schedule_stays_short_and_the_run_is_unchanged(
     monkeypatch: pytest.MonkeyPatch,
 ) -> None:
-    import feeder_ros.physics.simulation as simulation
+    import feeder_ros.physics.live_simulator as live_simulator
 
     params = FeederParameters(damping_ns_per_m=200.0)
     parts = (PartSpec(), PartSpec(position_m=0.01, static_friction=0.25, kinetic_friction=0.2))
     forgetting, short = _live_run(params, parts)
-    monkeypatch.setattr(simulation, "FORGET_DRIVE_CHANGES_AFTER", 10**9)  # keep everything
+    monkeypatch.setattr(live_simulator, "FORGET_DRIVE_CHANGES_AFTER", 10**9)  # keep everything
     remembering, long = _live_run(params, parts)
     assert long > 400  # every command stays in the schedule
     assert short <= 16  # (the threshold, 8, and the changes of one tick)
