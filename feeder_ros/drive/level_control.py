@@ -19,7 +19,9 @@ on any watched sensor for ``sensor_timeout_s`` (empty hopper, jam, dead sensor) 
 ``reset``; counted from the latest of the last change, the update at which feeding (re)started and
 the last reset. Pause time never counts: a covered sensor is the normal state of a full track.
 
-Decided here: a sensor not seen yet is unknown (None) and counts as free (the feeder starts by
+A sensor that changes and changes back at one instant (touching parts: one leaves as the next
+arrives, in either order) never changed, as a light barrier would see it. Decided here: a sensor
+not seen yet is unknown (None) and counts as free (the feeder starts by
 feeding); sensors report changes only, so the node seeds each known state with ``edge``. No timer
 counts from before the first ``update`` (or the last ``reset``/clock restart). An edge repeating
 the known state changes nothing (no timer restarts, no time-out activity). An edge stamped before
@@ -183,6 +185,7 @@ class _Sensor:
     covered: bool | None = None  # None: no edge seen yet (counts as free)
     since_s: float = -math.inf  # stamp of the last change
     stamp_s: float = -math.inf  # newest stamp seen; older edges are stale
+    before: tuple[bool | None, float] = (None, -math.inf)  # state and since before that change
 
 
 class LevelControl:
@@ -215,8 +218,15 @@ class LevelControl:
             self.stale_edges += 1
             return
         sensor.stamp_s = t_s
-        if sensor.covered is not bool(present):
-            sensor.covered, sensor.since_s = bool(present), t_s
+        if sensor.covered is bool(present):
+            return
+        if t_s - sensor.since_s <= _SLACK_S and sensor.before[0] is bool(present):
+            # back at the instant it changed (touching parts: one leaves as the next arrives, in
+            # either order): a light barrier never saw a change, its timers go on
+            sensor.covered, sensor.since_s = sensor.before
+            return
+        sensor.before = (sensor.covered, sensor.since_s)
+        sensor.covered, sensor.since_s = bool(present), t_s
 
     def update(self, t_s: float, feeding: bool) -> LevelDecision:
         """Whether feeding is allowed at ``t_s``; ``feeding``: the drive outputs vibration now."""

@@ -57,7 +57,7 @@ from feeder_ros.physics.drive import DriveError
 from feeder_ros.physics.errors import SimulationError
 from feeder_ros.physics.parameters import PARAMETER_SPECS, FeederParameters, ParameterError
 from feeder_ros.physics.simulation import EventKind, FeederSimulator, PartSpec, Phase
-from feeder_ros.physics.track_end import Picks, TrackEndQueue, pick_edges
+from feeder_ros.physics.track_end import Picks, TrackEndQueue, pick_edges, start_blocked
 from feeder_ros.sensors.accelerometer import AccelerometerModel
 from feeder_ros.sensors.part_presence import PartSensorArray
 from feeder_ros.srv import SpawnParts
@@ -339,7 +339,7 @@ class PlatformSimulator(Node):
         self._imu_index = 1  # sample k at k / rate; k = 0 is the state at rest, not published
         self._state_index = 1
         self._parts_index = 1
-        self._parts_out = 0
+        self._parts_out = self._feeds_blocked = 0  # feeds_blocked: see _bowl_feed
         self._exit_listed = np.zeros(count, bool)  # exited parts already sent once on parts/state
         self._last_feed_s = 0.0
         self._last_pick_s = 0.0
@@ -577,6 +577,7 @@ class PlatformSimulator(Node):
                 "state_samples_published": str(self._state_index - 1),
                 "parts_on_track": str(on_track),
                 "parts_out_total": str(self._parts_out),
+                "feeds_skipped_start_blocked": str(self._feeds_blocked),
                 "track_end": self._values["track_end"],
                 "drive_frequency_hz": f"{self._drive[0]:g}",
                 "drive_amplitude_n": f"{self._drive[1]:g}",
@@ -619,14 +620,21 @@ class PlatformSimulator(Node):
             if t > target:
                 return
             self._advance(t)
-            start = self._values["part_start_m"]
-            if t == next_feed:
+            if t == next_feed:  # a skipped feed waits for the next interval
                 self._last_feed_s = t
-                if self._queue is None or self._queue.admit_feed(start):
-                    self._sim.spawn_part(PartSpec(position_m=start))
+                self._bowl_feed(self._values["part_start_m"])
             if t == next_pick and self._queue is not None:
                 self._last_pick_s = t
                 self._queue.periodic_pick()
+
+    def _bowl_feed(self, start: float) -> None:
+        """A part at ``start`` if the queue has room and the bowl's exit is free (skips counted)."""
+        if self._queue is not None and not self._queue.admit_feed(start):
+            return  # the queue reached the start (counted by the queue)
+        if start_blocked(self._sim.track_positions(), start, self._sensors.part_length_m):
+            self._feeds_blocked += 1
+        else:
+            self._sim.spawn_part(PartSpec(position_m=start))
 
     def _grid(self, index: int, rate: float, t_end: float) -> tuple[np.ndarray, int]:
         last = math.floor(t_end * rate + 1e-9)

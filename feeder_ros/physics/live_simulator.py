@@ -677,6 +677,13 @@ class FeederSimulator:
                 break
         return chunks
 
+    def track_positions(self) -> F64:
+        """Every part's track position now (its lab position less the carrier's), NaN for parts
+        that left the track; no event, no change of state."""
+        totals = self._totals()
+        track = totals["part_end_x_m"] - float(self._state[_k.S_X])
+        return np.where(np.isnan(totals["part_exit_t_s"]), track, np.nan)
+
     def _totals(self) -> dict[str, F64]:
         m, g = self._m, self._g
         N = m.size

@@ -29,8 +29,8 @@ Model:
   of the next chunk. Either way, once the part ahead of it has joined, a part is never shown
   past its slot. Parts are points to the physics (nothing keeps two moving parts a part length
   apart): a part already past the tail when the part ahead of it joins is set back to its slot at
-  once; parts put down on top of each other (a bowl feeding a track that does not move) queue one
-  per slot, past the track's start if need be.
+  once; parts put down on top of each other (spawned together with no spacing) queue one per
+  slot, past the track's start if need be.
 * **Picking.** A pick takes the front part off the track at once (it leaves the feeder: the
   node publishes it on ``parts/exit``) and the remaining parts move up one slot *at once*, a
   simplification: a real row slides forward in a fraction of a second. The tail moves forward by
@@ -42,6 +42,15 @@ Model:
   (:meth:`TrackEndQueue.is_full`). The core's track length stays positive (a full track with
   ``part_start_m`` near 0 can push the tail to or below 0: the core then gets
   :data:`MIN_CORE_TRACK_M`).
+* **The bowl's exit.** Open track end or stopper, a bowl cannot put a part onto an occupied
+  track start (a track that does not move would get parts on top of each other): a feed is
+  skipped while a part still on the track would overlap the new one (:func:`start_blocked`: a
+  front within a part length of ``part_start_m``; touching is no overlap; with ``part_length_m``
+  0, parts as points, only a part at the feed position itself, to :data:`COINCIDENT_M`). The node
+  counts such skips (``feeds_skipped_start_blocked``) apart from those on a full track
+  (``feeds_skipped_track_full``), and feeds again at the next feed interval. It checks the parts
+  still in the physics core: queued parts never block a track that is not full (the last one's
+  rear is the tail, past the feed position).
 * **Sensors.** Queued parts are written into the sampled track positions at their slots
   (:meth:`TrackEndQueue.overlay`) before the part-present sensors see them: a sensor under the
   queue gets its rising edge when a part arrives over it and no edge while the part sits there. At
@@ -64,17 +73,22 @@ import numpy.typing as npt
 from feeder_ros.physics.parameters import ParameterError, finite_number
 
 __all__ = [
+    "COINCIDENT_M",
     "MIN_CORE_TRACK_M",
     "Join",
     "Picks",
     "TrackEndQueue",
     "covered_sensors",
     "pick_edges",
+    "start_blocked",
 ]
 
 F64 = npt.NDArray[np.float64]
 #: the physics core's track length when the queue's tail is at or below the track's start
 MIN_CORE_TRACK_M = 1e-9
+#: round-off of track positions: parts touching to this do not overlap; parts of length 0 (points)
+#: overlap only at the same position, to this
+COINCIDENT_M = 1e-9
 
 
 @dataclass(frozen=True)
@@ -332,6 +346,16 @@ def _crossing(times: F64, x: F64, level: float, end: tuple[float, float] | None)
         t0, x0 = float(times[row]), float(x[row])
         t1, x1 = end
     return t0 + (t1 - t0) * (level - x0) / (x1 - x0) if x1 != x0 else t1
+
+
+def start_blocked(track_m: npt.ArrayLike, start_m: float, part_length_m: float) -> bool:
+    """Whether a part put down at ``start_m`` would overlap a part on the track (the bowl's exit
+    is blocked): a front in ``track_m`` (nan: no part) less than ``part_length_m`` from
+    ``start_m``, ahead or behind. Touching parts (a part length apart to :data:`COINCIDENT_M`)
+    do not overlap; parts of length 0 do when they stand at the same position (to it)."""
+    fronts = np.asarray(track_m, dtype=np.float64)
+    reach = max(float(part_length_m) - COINCIDENT_M, COINCIDENT_M)
+    return bool(np.any(np.abs(fronts - start_m) < reach))  # nan compares False
 
 
 def covered_sensors(positions_m: Sequence[float], part_length_m: float, track: F64) -> list[bool]:

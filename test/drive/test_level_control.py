@@ -329,3 +329,25 @@ def test_an_edge_stamped_on_the_clock_before_a_restart_does_not_block_the_new_on
     control.edge(1.5, FULL, False)  # the new clock: not stale
     assert state_at(control, 2.5, False) is LevelState.FEEDING
     assert control.stale_edges == 0
+
+
+@pytest.mark.parametrize("leaves_first", [True, False])
+def test_touching_parts_changing_over_at_one_instant_leave_the_sensor_covered(
+    leaves_first: bool,
+) -> None:
+    """One part leaves the full sensor as the next arrives, at one stamp, in either order: the
+    barrier stays dark, so the off delay runs on from the first part's arrival."""
+    control = one_sensor(off=2.0, timeout=3.0)
+    control.edge(1.0, FULL, True)
+    for present in (False, True) if leaves_first else (True, False):
+        control.edge(2.5, FULL, present)  # covered, then the second edge at the same instant
+    if not leaves_first:  # covered -> covered is no change; then the leaving edge comes
+        control.edge(2.5, FULL, True)
+    assert state_at(control, 3.0) is LevelState.FULL  # 2 s since 1.0, not since 2.5
+    # a real free instant (0.1 s) does restart the delay
+    fresh = one_sensor(off=2.0)
+    fresh.edge(1.0, FULL, True)
+    fresh.edge(2.5, FULL, False)
+    fresh.edge(2.6, FULL, True)
+    assert state_at(fresh, 3.0) is LevelState.FEEDING
+    assert state_at(fresh, 4.6) is LevelState.FULL

@@ -3,6 +3,7 @@ see, and the queue driven by the exact physics core the way the platform simulat
 
 from __future__ import annotations
 
+from collections.abc import Callable
 from typing import NamedTuple
 
 import numpy as np
@@ -11,12 +12,14 @@ import pytest
 from feeder_ros.physics.parameters import FeederParameters, ParameterError
 from feeder_ros.physics.simulation import EventKind, FeederSimulator, PartSpec
 from feeder_ros.physics.track_end import (
+    COINCIDENT_M,
     MIN_CORE_TRACK_M,
     Join,
     Picks,
     TrackEndQueue,
     covered_sensors,
     pick_edges,
+    start_blocked,
 )
 from feeder_ros.sensors.part_presence import PartSensorArray, SensorEdge
 
@@ -139,6 +142,22 @@ def test_status_reports_the_queue() -> None:
         "picks_missed_queue_empty": "0",
         "feeds_skipped_track_full": "1",
     }
+
+
+# -- the bowl's exit ----------------------------------------------------------------------------
+def test_a_part_within_a_part_length_of_the_start_blocks_a_feed() -> None:
+    start = 0.02
+    assert not start_blocked([], start, L)  # an empty track
+    assert not start_blocked([np.nan, np.nan], start, L)  # parts gone
+    assert start_blocked([start], start, L)  # on the spot (a track that does not move)
+    assert start_blocked([0.1, start + 0.0099], start, L)  # ahead, overlapping
+    assert start_blocked([start - 0.0099], start, L)  # behind it, overlapping too
+    assert not start_blocked([start + L, start - L, np.nan], start, L)  # touching: room
+    assert start_blocked([start + L - 2 * COINCIDENT_M], start, L)  # more than round-off
+    assert not start_blocked(np.array([0.05, 0.1]), start, L)
+    # parts of length 0 are points: only one at the start itself (to round-off) blocks
+    assert start_blocked([start + 0.5 * COINCIDENT_M], start, 0.0)
+    assert not start_blocked([start + 2 * COINCIDENT_M, start - 1e-6], start, 0.0)
 
 
 # -- joins within a chunk (synthetic core output) ----------------------------------------------
@@ -331,9 +350,16 @@ class Run(NamedTuple):
     joins: list[Join]
 
 
-def _run(sim: FeederSimulator, queue: TrackEndQueue, t_end: float, chunk_s: float) -> Run:
+def _run(
+    sim: FeederSimulator,
+    queue: TrackEndQueue,
+    t_end: float,
+    chunk_s: float,
+    between: Callable[[np.ndarray], None] | None = None,
+) -> Run:
     """Advance in chunks the way the node does: picks asked for carried out at a chunk's start,
-    samples every ms and at both chunk ends, the core's track end at the tail."""
+    samples every ms and at both chunk ends, the core's track end at the tail; ``between`` gets
+    each chunk's last row of the core's track positions (before the queue is written in)."""
     rows_t, rows, carrier, joins = [], [], [], []
     while sim.time_s < t_end - 1e-12:
         t0, t1 = sim.time_s, min(sim.time_s + chunk_s, t_end)
@@ -343,9 +369,12 @@ def _run(sim: FeederSimulator, queue: TrackEndQueue, t_end: float, chunk_s: floa
         _follow(sim, queue)
         result = sim.advance(t1, times)
         track = result.part_x_m - result.carrier_x_m[:, None]
+        last = track[-1].copy()
         exits = result.event_kind == EventKind.PART_EXIT
         joins += queue.settle(times, track, result.event_t_s[exits], result.event_part[exits])
         _follow(sim, queue)
+        if between is not None:
+            between(last)
         rows_t.append(times)
         rows.append(track)
         carrier.append(result.carrier_x_m)
@@ -411,3 +440,29 @@ def test_parts_closer_than_a_part_length_still_queue_one_per_slot() -> None:
         later = run.track[run.times >= times[k - 1], k]
         assert np.nanmax(later) <= queue.slot_m(k) + 1e-12
         assert later[-1] == pytest.approx(queue.slot_m(k))
+
+
+def test_reading_the_parts_between_chunks_changes_nothing() -> None:
+    """Before a feed the node reads where the parts are (PlatformSimulator._bowl_feed, through
+    FeederSimulator.track_positions): the positions the last chunk ended with, NaN for parts the
+    core let go; the run is the same as without the reads (a part joined from the samples is
+    still let go at the next chunk's start)."""
+    parts = [PartSpec(position_m=0.03 - 0.006 * k) for k in range(4)]
+    plain = _run(FeederSimulator(PLANT, parts), TrackEndQueue(PLANT.track_length_m, L), 4.0, 0.5)
+    sim = FeederSimulator(PLANT, parts)
+    queue = TrackEndQueue(PLANT.track_length_m, L)
+    queued_in_core = 0
+
+    def read(last: np.ndarray) -> None:
+        nonlocal queued_in_core
+        x = sim.track_positions()
+        on = ~np.isnan(x)  # still in the core
+        np.testing.assert_allclose(x[on], last[on], rtol=0, atol=1e-12)
+        assert np.all(np.isnan(last[~on]))
+        queued_in_core += sum(1 for part in queue.parts if on[part])
+
+    reads = _run(sim, queue, 4.0, 0.5, between=read)
+    assert queued_in_core > 0  # the case that matters: joined, not yet let go by the core
+    assert reads.joins == plain.joins
+    np.testing.assert_array_equal(reads.track, plain.track)
+    np.testing.assert_array_equal(reads.carrier_x_m, plain.carrier_x_m)

@@ -21,6 +21,7 @@ from typing import Any
 
 import pytest
 import yaml
+from diagnostic_msgs.msg import DiagnosticArray
 from rclpy.action.client import ActionClient
 from ros_test_tools import DrainedProcess, call, probe_node, wait_until
 from std_srvs.srv import Trigger
@@ -29,7 +30,7 @@ from feeder_ros.action import FeedParts
 from feeder_ros.cell import load_cell, parameters_document
 from feeder_ros.cli.cell import node_executables
 from feeder_ros.examples.cell_controller import CellController
-from feeder_ros.msg import DriveState, PartSensorEvent
+from feeder_ros.msg import DriveState, PartSensorEvent, PartStateArray
 from feeder_ros.srv import SetDrive
 
 BIN = Path(sys.executable).parent
@@ -292,6 +293,84 @@ def _stamp(message: Any) -> float:
     return float(message.header.stamp.sec) + float(message.header.stamp.nanosec) * 1e-9
 
 
+@dataclass(frozen=True)
+class LevelCycles:
+    """What :func:`_check_level_cycles` measured on the wire."""
+
+    pause_delays_s: list[float]  # per stop: full sensor's covering edge -> first output at zero
+    resume_waits_s: list[float]  # per resume: low sensor free -> the drive out of PAUSED
+
+
+def _level_cycles(states: list[DriveState]) -> int:
+    """Level pauses the drive came out of: runs of PAUSED states with a RUNNING one after."""
+    cycles, paused = 0, False
+    for message in states:
+        if message.state == DriveState.STATE_PAUSED:
+            paused = True
+        elif message.state == DriveState.STATE_RUNNING and paused:
+            cycles, paused = cycles + 1, False
+    return cycles
+
+
+def _check_level_cycles(
+    states: list[DriveState],
+    edges: list[tuple[float, int, int, bool]],
+    off_delay: float,
+    on_delay: float,
+    full_sensor: int = 0,
+    low_sensor: int = 1,
+) -> LevelCycles:
+    """Level control (two sensors) as the wire shows it: paused only for a full track, with the
+    output at zero; no part pushed onto a full track longer than the off delay plus the ramp to
+    zero (from the full sensor's covering edge to the first output at zero); every resume after
+    the low sensor had been free for the on delay."""
+    paused_states = [m for m in states if m.state == DriveState.STATE_PAUSED]
+    assert all("track full" in m.pause_reason for m in paused_states)
+    assert all(m.level_state == DriveState.LEVEL_FULL for m in paused_states)
+    assert all(m.amplitude_percent == 0.0 for m in paused_states)
+    full_on = [t for t, s, _, on in edges if s == full_sensor and on]
+    stopped = [
+        _stamp(m)
+        for prev, m in itertools.pairwise(states)
+        if m.amplitude_percent == 0.0 and prev.amplitude_percent > 0.0
+    ]
+    delays = []
+    for t_zero in stopped:
+        covered = [t for t in full_on if t <= t_zero]
+        if not covered:
+            continue  # a stop that was no level pause (none here: the drive never stops)
+        delays.append(t_zero - covered[-1])
+        assert delays[-1] <= off_delay + STOP_RAMP_S + 0.3, (t_zero, covered[-1])
+    resumed = [
+        _stamp(m)
+        for prev, m in itertools.pairwise(states)
+        if prev.state == DriveState.STATE_PAUSED and m.state != DriveState.STATE_PAUSED
+    ]
+    low_off = [t for t, s, _, on in edges if s == low_sensor and not on]
+    waits = []
+    for t_resume in resumed:
+        freed = [t for t in low_off if t <= t_resume]
+        assert freed, "resumed without the low sensor clearing"
+        waits.append(t_resume - freed[-1])
+        assert waits[-1] >= on_delay - 0.05
+    return LevelCycles(delays, waits)
+
+
+def _cycles_report(
+    cycles: int, states: list[DriveState], edges: list[tuple[float, int, int, bool]]
+) -> str:
+    last = states[-1] if states else None
+    return (
+        f"level control paused and resumed {cycles} times; drive states seen: "
+        f"{sorted({m.state for m in states})}; edges per sensor (on, off): "
+        f"{[[e[3] for e in edges if e[1] == k].count(on) for k in (0, 1) for on in (1, 0)]}; "
+        f"last: state {last and last.state}, level {last and last.level_state} "
+        f"{last and list(last.level_sensors)}, {last and last.pause_reason!r}, "
+        f"fault {last and last.fault_reason!r}; edges "
+        f"{[(round(t - edges[0][0], 1), k, p, on) for t, k, p, on in edges][:60]}"
+    )
+
+
 @pytest.mark.timeout(240)
 def test_level_control_pauses_on_a_full_track_resumes_and_times_out_without_parts(
     tmp_path: Path,
@@ -306,7 +385,7 @@ def test_level_control_pauses_on_a_full_track_resumes_and_times_out_without_part
     simulator = {
         "track_end": "stopper",
         "pick_interval_s": 0.0,  # the test is the robot: it picks while the feeder waits
-        "feed_interval_s": 0.0,  # a finite supply: a bowl would stack parts at the start
+        "feed_interval_s": 0.0,  # a finite supply (the bowl-fed cell: the next test)
         "initial_parts": 16,  # touching, 0 .. 0.16 m
         "part_spacing_m": 0.01,
         "sensor_positions_m": "0.165, 0.185",  # sorted: index 0 upstream
@@ -329,59 +408,15 @@ def test_level_control_pauses_on_a_full_track_resumes_and_times_out_without_part
         while time.monotonic() < deadline and pauses < 1:
             with wire.lock:
                 states = [m for _, m in wire.states]
-            names = [m.state for m in states]
-            if names and names[-1] == DriveState.STATE_PAUSED:  # the robot takes a part
+            if states and states[-1].state == DriveState.STATE_PAUSED:  # the robot takes a part
                 call(probe, Trigger, f"{namespace}/platform_simulator/pick_part", Trigger.Request())
-            # a pause counts once the drive ran again after it
-            runs = [i for i, s in enumerate(names) if s == DriveState.STATE_RUNNING]
-            paused = [i for i, s in enumerate(names) if s == DriveState.STATE_PAUSED]
-            pauses = sum(
-                1
-                for k, i in enumerate(paused)
-                if (k == 0 or paused[k - 1] != i - 1) and any(j > i for j in runs)
-            )
+            pauses = _level_cycles(states)
             time.sleep(0.7)
         with wire.lock:
             states = [m for _, m in wire.states]
             edges = list(wire.edges)
-        last = states[-1] if states else None
-        assert pauses >= 1, (
-            f"level control paused and resumed {pauses} times; drive states seen: "
-            f"{sorted({m.state for m in states})}; edges per sensor (on, off): "
-            f"{[[e[3] for e in edges if e[1] == k].count(on) for k in (0, 1) for on in (1, 0)]}; "
-            f"last: state {last and last.state}, level {last and last.level_state} "
-            f"{last and list(last.level_sensors)}, {last and last.pause_reason!r}, "
-            f"fault {last and last.fault_reason!r}; edges "
-            f"{[(round(t - edges[0][0], 1), k, p, on) for t, k, p, on in edges][:60]}"
-        )
-        paused_states = [m for m in states if m.state == DriveState.STATE_PAUSED]
-        assert all("track full" in m.pause_reason for m in paused_states)
-        assert all(m.level_state == DriveState.LEVEL_FULL for m in paused_states)
-        assert all(m.amplitude_percent == 0.0 for m in paused_states)
-        # no part pushed onto a full track longer than the off delay plus the ramp to zero:
-        # from the full sensor's covering edge to the first output at zero
-        full_on = [t for t, s, _, on in edges if s == 0 and on]
-        stopped = [
-            _stamp(m)
-            for prev, m in itertools.pairwise(states)
-            if m.amplitude_percent == 0.0 and prev.amplitude_percent > 0.0
-        ]
-        for t_zero in stopped:
-            covered = [t for t in full_on if t <= t_zero]
-            if not covered:
-                continue  # a stop that was no level pause (none here: the drive never stops)
-            assert t_zero - covered[-1] <= off_delay + STOP_RAMP_S + 0.3, (t_zero, covered[-1])
-        # every resume came after the low sensor had been free for the on delay
-        resumed = [
-            _stamp(m)
-            for prev, m in itertools.pairwise(states)
-            if prev.state == DriveState.STATE_PAUSED and m.state != DriveState.STATE_PAUSED
-        ]
-        low_off = [t for t, s, _, on in edges if s == 1 and not on]
-        for t_resume in resumed:
-            freed = [t for t in low_off if t <= t_resume]
-            assert freed, "resumed without the low sensor clearing"
-            assert t_resume - freed[-1] >= on_delay - 0.05
+        assert pauses >= 1, _cycles_report(pauses, states, edges)
+        _check_level_cycles(states, edges, off_delay, on_delay)
 
         # no part left: the sensors stay unchanged while feeding, a latched fault with the reason
         assert wait_until(lambda: wire.last_state().state == DriveState.STATE_FAULT, 40.0), (
@@ -391,3 +426,118 @@ def test_level_control_pauses_on_a_full_track_resumes_and_times_out_without_part
         assert last.level_state == DriveState.LEVEL_FAULT
         assert "sensor time-out" in last.fault_reason
         assert "unchanged for 15.0 s while feeding" in last.fault_reason
+
+
+@dataclass
+class TrackWatch:
+    """The simulator's parts/state and diagnostics, reduced as they arrive (50 Hz parts/state)."""
+
+    band_m: tuple[float, float]  # (full sensor, low sensor)
+    part_length_m: float
+    lock: threading.Lock = field(default_factory=threading.Lock)
+    most_between: int = 0  # parts over the band between the sensors, at most
+    most_on_track: int = 0
+    status: dict[str, str] = field(default_factory=dict)  # the latest simulation diagnostics
+    most_queued: int = 0
+
+    def on_parts(self, message: PartStateArray) -> None:
+        fronts = [p.position_m for p in message.parts if p.on_track]
+        full, low = self.band_m
+        between = sum(1 for x in fronts if x >= full and x - self.part_length_m <= low)
+        with self.lock:
+            self.most_between = max(self.most_between, between)
+            self.most_on_track = max(self.most_on_track, len(fronts))
+
+    def on_diagnostics(self, message: DiagnosticArray, name: str) -> None:
+        for status in message.status:
+            if status.name == f"{name}: simulation":
+                values = {v.key: v.value for v in status.values}
+                with self.lock:
+                    self.status = values
+                    self.most_queued = max(self.most_queued, int(values["parts_queued"]))
+
+
+@pytest.mark.timeout(240)
+def test_level_control_cycles_a_bowl_fed_track_between_its_sensors(tmp_path: Path) -> None:
+    """Issue 34: level control cycles the feeder on and off, keeping the track between the
+    sensors. Parts 5 mm long move about 7 mm/s; a bowl feeds one every 1.5 s (10.5 mm apart) and
+    a robot at the stopper picks one every 2 s: more come in than go out, so the queue grows while
+    the drive feeds and shrinks while it is paused. The track starts with such a stream (9 parts
+    10.5 mm apart from the start). Stopper at 0.1 m, slots of 5 mm: the full sensor at 0.0875 m
+    (slot 2) is covered from 3 parts queued, the low one at 0.0925 m (slot 1) is free below 2.
+    Over the band between the sensors (0.0875 .. 0.0925 m) stand at most 2 parts: the parts in
+    slots 1 and 2 (a moving part reaches the band only with at most one queued).
+
+    A stream joins a queue fast: each part stops a part length short of where the one before
+    stopped, so parts 10.5 mm apart join every (10.5 - 5) mm / 7 mm/s = 0.8 s, and the queue
+    overshoots the full sensor by a part or two during the off delay and the ramp (1 cm parts
+    fed 1.05 cm apart joined one after the other within them: the queue ran back to the bowl).
+    A passing part covers a sensor for about 0.7 s (1.3 s from rest): the off delay (2 s) is
+    longer, so only a queued part pauses the drive.
+
+    The drive must pause and resume at least 3 times, each pause within the off delay and the
+    ramp of the full sensor's covering edge (the output at zero while paused), each resume after
+    the low sensor was free for the on delay; the queue never reaches the track's start (no feed
+    skipped on a full track); while paused, the bowl's exit is blocked (feeds skipped)."""
+    off_delay, on_delay = 2.0, 0.5
+    full_m, low_m, length_m = 0.0875, 0.0925, 0.005
+    simulator = {
+        "track_end": "stopper",
+        "track_length_m": 0.1,
+        "feed_interval_s": 1.5,
+        "pick_interval_s": 2.0,
+        "initial_parts": 9,
+        "part_spacing_m": 0.0105,
+        "part_length_m": length_m,
+        "sensor_positions_m": f"{full_m}, {low_m}",  # sorted: index 0 (full) upstream
+    }
+    drive = {
+        "level": {
+            "mode": "two_sensors",
+            "low_sensor_index": 1,
+            "full_sensor_index": 0,
+            "off_delay_s": off_delay,
+            "on_delay_s": on_delay,
+            "sensor_timeout_s": 20.0,
+        }
+    }
+    namespace = "/feed_cycles/feeder"
+    with feeding_cell(tmp_path, namespace, simulator, drive) as (probe, wire, controller, _):
+        watch = TrackWatch((full_m, low_m), length_m)
+        probe.create_subscription(PartStateArray, f"{namespace}/parts/state", watch.on_parts, 100)
+        probe.create_subscription(
+            DiagnosticArray,
+            "/diagnostics",
+            lambda m: watch.on_diagnostics(m, f"{namespace}/platform_simulator"),
+            10,
+        )
+        started = time.monotonic()
+        assert controller.start(wait_s=30.0)
+        cycles, states = 0, []
+        while time.monotonic() < started + 150.0 and cycles < 3:
+            time.sleep(0.5)
+            with wire.lock:
+                states = [m for _, m in wire.states]
+            cycles = _level_cycles(states)
+        elapsed = time.monotonic() - started
+        with wire.lock:
+            states = [m for _, m in wire.states]
+            edges = list(wire.edges)
+        assert cycles >= 3, _cycles_report(cycles, states, edges)
+        measured = _check_level_cycles(states, edges, off_delay, on_delay)
+        assert len(measured.pause_delays_s) >= 3  # every pause from a covered full sensor
+        assert wait_until(lambda: bool(watch.status), 5.0), "no simulation diagnostics"
+        with watch.lock:
+            status = dict(watch.status)
+            most_between, most_queued = watch.most_between, watch.most_queued
+            most_on_track = watch.most_on_track
+        print(
+            f"{cycles} cycles in {elapsed:.1f} s; pause delays "
+            f"{[round(d, 2) for d in measured.pause_delays_s]} s (limit "
+            f"{off_delay + STOP_RAMP_S + 0.3:.1f}), resume waits "
+            f"{[round(w, 2) for w in measured.resume_waits_s]} s; most queued {most_queued}, "
+            f"between the sensors {most_between}, on the track {most_on_track}; {status}"
+        )
+        assert status["feeds_skipped_track_full"] == "0"  # the queue never reached the start
+        assert int(status["feeds_skipped_start_blocked"]) > 0  # the bowl waited while paused
+        assert most_between <= 2

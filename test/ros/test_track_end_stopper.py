@@ -1,7 +1,8 @@
 """The platform simulator's track-end stopper as a real process over DDS: parts queue at the end of
 the track, sit still at their slots (parts/state), cover the part-present sensors and leave the
 feeder only when picked, on request (``~/pick_part``) or on the robot's schedule
-(``pick_interval_s``); feeds onto a full track are skipped; an open track end refuses picks.
+(``pick_interval_s``); feeds onto a full track are skipped; an open track end refuses picks. A
+bowl (either track end) puts no part onto one still at the track's start.
 
 Simulated time at 5x real time (``use_sim_time``: the simulator publishes /clock and stamps
 everything on it); the drive is an unstamped command (applied at once) with no command timeout.
@@ -9,6 +10,7 @@ everything on it); the drive is an unstamped command (applied at once) with no c
 
 from __future__ import annotations
 
+import math
 import sys
 import threading
 from dataclasses import dataclass, field
@@ -32,11 +34,11 @@ RELIABLE = QoSProfile(depth=1000, reliability=ReliabilityPolicy.RELIABLE)
 L = 0.01  # part length
 
 
-def _command(ns: str, *parameters: str) -> list[str]:
+def _command(ns: str, *parameters: str, track_end: str = "stopper") -> list[str]:
     arguments = ["-p", "use_sim_time:=true", "-p", "real_time_factor:=5.0"]
     arguments += ["-p", "command_timeout_s:=0.0", "-p", "damping_ns_per_m:=200.0"]
     arguments += ["-p", "imu_rate_hz:=100.0", "-p", "state_rate_hz:=100.0"]
-    arguments += ["-p", "track_end:=stopper", "-p", f"part_length_m:={L}"]
+    arguments += ["-p", f"track_end:={track_end}", "-p", f"part_length_m:={L}"]
     for item in parameters:
         arguments += ["-p", item]
     return [SIMULATOR, "--ros-args", "-r", f"__ns:={ns}", *arguments]
@@ -278,6 +280,63 @@ def test_a_robot_picks_periodically_and_feeds_onto_a_full_track_are_skipped() ->
         status = wire.fresh_status()
         assert status["parts_queued"] == "0"
         assert status["parts_picked_total"] == "0"
+
+
+@pytest.mark.parametrize("track_end", ["stopper", "open"])
+def test_a_bowl_puts_no_part_onto_one_at_the_start(track_end: str) -> None:
+    """A bowl feeding every 0.1 s onto a track that does not move (no drive yet): one part at the
+    start, every other feed skipped (the bowl's exit is blocked) and counted, none on top of it.
+    Once the track moves the bowl feeds again, on its interval: each new part is put down a part
+    length or more behind the one ahead (16 mm/s: every 0.6-0.7 s, 10-11 mm apart)."""
+    ns = f"/bowl_exit_{track_end}"
+    start, interval = 0.005, 0.1
+    command = _command(
+        ns,
+        "track_length_m:=0.1",
+        "initial_parts:=0",
+        f"part_start_m:={start}",
+        f"feed_interval_s:={interval}",
+        "sensor_positions_m:='0.05'",
+        track_end=track_end,
+    )
+    with running(command), probe_node() as node:
+        wire = Wire()
+        wire.listen(node, ns)
+        assert wait_until(lambda: float(wire.fresh_status()["simulated_time_s"]) >= 5.0, 30.0)
+        status = wire.fresh_status()
+        with wire.lock:
+            still = list(wire.parts)
+        assert still, "no parts/state"
+        for message in still:  # after the first feed (0.1 s): that part alone, where it was put
+            on_track = [p.position_m for p in message.parts if p.on_track]
+            assert on_track == ([start] if _stamp(message) > interval + 1e-6 else []), on_track
+        # every feed interval tried: the first one fed, all the others skipped
+        feeds = int(float(status["simulated_time_s"]) / interval + 1e-6)
+        assert abs(int(status["feeds_skipped_start_blocked"]) - (feeds - 1)) <= 1, (feeds, status)
+        assert status["parts_on_track"] == "1"
+        assert status.get("feeds_skipped_track_full", "0") == "0"  # (stopper: never full)
+
+        drive = _drive(node, ns)
+        assert wait_until(lambda: drive() or len(wire.on_track()) >= 4, 60.0), wire.latest()
+        with wire.lock:
+            states = list(wire.parts)
+        first: dict[int, PartStateArray] = {}  # the message that first lists each part
+        for message in states:
+            for part in message.parts:
+                first.setdefault(part.part_id, message)
+        fed = sorted(first)
+        assert fed == list(range(len(fed))), fed
+        for part in fed[1:]:  # put down at the start, clear of every other part
+            fronts = {p.part_id: p.position_m for p in first[part].parts if p.on_track}
+            assert fronts[part] == pytest.approx(start, abs=1e-3)  # (<= 20 ms of travel)
+            gaps = [abs(x - fronts[part]) for i, x in fronts.items() if i != part]
+            assert min(gaps) >= L - 1e-4, (part, fronts)
+        # put down on the feed schedule (k * interval: a skipped feed is tried at the next one),
+        # first listed at the next parts/state sample (50 Hz) after it
+        stamps = [_stamp(first[part]) for part in fed[1:]]
+        after = [t - interval * math.floor(t / interval - 1e-6) for t in stamps]
+        assert all(0.0 < dt <= 0.02 + 1e-6 for dt in after), (stamps, after)
+        print(f"{track_end}: parts 1.. first listed at {[round(t, 3) for t in stamps]} s (sim)")
 
 
 def test_an_open_track_end_refuses_picks() -> None:
