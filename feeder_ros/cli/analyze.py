@@ -36,6 +36,15 @@ EPILOG = (
     "Exit status: 0 every bag analysed whole; 1 some bag could not be analysed or lost recorded "
     "messages (a truncated file, corrupt chunks, a missing split file: its counts and feed rates "
     "are short), the other results printed and written all the same; 2 no bag could be analysed"
+    """
+
+examples:
+  # a bag from 'feeder record': its drive settings, part speeds, slip and feed rate
+  feeder analyze run1
+  # two bags compared; CSV, JSON, PNG plots and report.html into report/
+  feeder analyze run1 run2 --output report
+  # one feeder of a bag that holds several; settings shorter than 2 s left out
+  feeder analyze run1 --namespace /demo_cell/feeder_1 --min-segment 2"""
 )
 
 

@@ -1,8 +1,9 @@
 """``feeder cell``: bring up a feeder cell from its description (``config/cell.yaml``).
 
 Each node runs as its own process, like a launch file (default), or all in one process
-(``--composed``). Ctrl-C or SIGTERM stops every node cleanly; a node that dies stops the cell;
-children also get SIGTERM if this process itself is killed, so no node is left orphaned.
+(``--composed``). Ctrl-C or SIGTERM, the normal end of a running cell, stops every node cleanly
+(exit status 0); a node that dies stops the cell (1); children also get SIGTERM if this process
+itself is killed, so no node is left orphaned.
 ``--list`` prints each node's command line and the cell's parameter file instead (written to
 ``--params-out FILE`` for the printed commands to use, or printed after them).
 """
@@ -30,6 +31,20 @@ from feeder_ros.cli.main import CommandError
 from feeder_ros.cli.outputs import check_output_file, output_path
 
 HELP = "start a feeder cell (all its nodes) from a cell description; Ctrl-C stops it"
+EPILOG = """\
+Ctrl-C: the normal way to stop a running cell (SIGTERM too): every node started so far is
+stopped, then exit status 0. A node still running 10 s later is killed (--composed: a teardown
+stuck in the middleware ends the process after 10 s): exit status 1. A node that exits by itself
+stops the cell: exit status 1. A Ctrl-C before the cell starts (its '[cell] NAME: N nodes' line)
+cuts the command short: exit status 130.
+
+examples:
+  # the demo cell of config/cell.yaml, each node its own process, until Ctrl-C
+  feeder cell
+  # every node in this one process, for one minute
+  feeder cell --composed --duration 60
+  # the nodes' command lines, their parameters written to parameters.yaml
+  feeder cell --list --params-out parameters.yaml"""
 CELL_FILE = "cell.yaml"
 _PR_SET_PDEATHSIG = 1
 
@@ -141,25 +156,31 @@ def _stop_all(processes: list[tuple[NodeLaunch, subprocess.Popen[bytes]]]) -> in
 
 
 def run_composed(cell: CellDescription, parameters_file: Path, duration: float | None) -> int:
-    import importlib
-
-    from rclpy.executors import ExternalShutdownException
-
-    from feeder_ros.nodes.catalog import NODE_MODULES
-    from feeder_ros.nodes.runner import StopOnShutdown
-    from feeder_ros.ros_compat import RosSession
-
-    modules = {name.rsplit(".", 1)[-1]: name for name in NODE_MODULES}
-    classes = {
-        executable: importlib.import_module(modules[executable]).NODE_CLASS
-        for executable in {launch.executable for launch in cell.nodes}
-    }
     try:
-        with RosSession() as init, StopOnShutdown(init.context):
-            _spin_composed(cell, classes, parameters_file, duration)
-    except (KeyboardInterrupt, ExternalShutdownException):
-        # rclpy's handler shuts the context down, then chains to Python's (KeyboardInterrupt),
-        # which can land anywhere in the shutdown: the cell is stopping either way
+        # the imports take seconds (rclpy, the nodes' modules): a Ctrl-C meanwhile stops the
+        # cell as it does once the nodes run (nothing started yet to stop), exit status 0
+        import importlib
+
+        from rclpy.executors import ExternalShutdownException
+
+        from feeder_ros.nodes.catalog import NODE_MODULES
+        from feeder_ros.nodes.runner import StopOnShutdown
+        from feeder_ros.ros_compat import RosSession
+
+        modules = {name.rsplit(".", 1)[-1]: name for name in NODE_MODULES}
+        classes = {
+            executable: importlib.import_module(modules[executable]).NODE_CLASS
+            for executable in {launch.executable for launch in cell.nodes}
+        }
+        try:
+            with RosSession() as init, StopOnShutdown(init.context):
+                _spin_composed(cell, classes, parameters_file, duration)
+        except ExternalShutdownException:
+            pass
+    except KeyboardInterrupt:
+        # also: rclpy's handler shuts the context down, then chains to Python's
+        # (KeyboardInterrupt), which can land anywhere in the shutdown: the cell is stopping
+        # either way
         pass
     finally:
         faulthandler.cancel_dump_traceback_later()  # armed for the nodes' teardown
@@ -237,6 +258,9 @@ def run(args: argparse.Namespace) -> int:
         parameters_file = Path(directory) / "parameters.yaml"
         parameters_file.write_text(parameters_document(cell), encoding="utf-8")
         os.environ.setdefault("ROS_AUTOMATIC_DISCOVERY_RANGE", "LOCALHOST")
-        print(f"[cell] {cell.name}: {len(cell.nodes)} nodes in {len(cell.feeders)} feeder(s)")
+        print(
+            f"[cell] {cell.name}: {len(cell.nodes)} nodes in {len(cell.feeders)} feeder(s)",
+            flush=True,  # from this line on, Ctrl-C is the cell's normal stop (exit status 0)
+        )
         runner = run_composed if args.composed else run_processes
         return runner(cell, parameters_file, args.duration)

@@ -39,13 +39,21 @@ from feeder_ros.design.sensitivity import sensitivity_table
 from feeder_ros.design.space import DesignConfig, load_design_config
 from feeder_ros.physics.parameters import FeederParameters
 
-__all__ = ["DESIGN_NAME", "HELP", "add_arguments", "run"]
+__all__ = ["DESIGN_NAME", "EPILOG", "HELP", "add_arguments", "run"]
 
 HELP = (
     "search the carrier design (L_f, L_b, plates, angle, drive) for the fastest parts under the "
     "stick-slip conditions"
 )
 DESIGN_NAME = "design.yaml"
+EPILOG = """\
+examples:
+  # the fastest parts within config/design.yaml; report files and optimum_params.yaml in design/
+  feeder design --output design
+  # parts at 15 mm/s with the least drive force
+  feeder design --objective min-force --target-speed 0.015 --output design_min_force
+  # a quick search for a part with more static friction, another seed
+  feeder design --set static_friction=0.3 --generations 10 --seed 1"""
 
 
 def _speed(text: str) -> float:

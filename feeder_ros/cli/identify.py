@@ -65,7 +65,20 @@ HELP = "sweep the drive frequency (sim, live cell or bags) and fit a transfer fu
 EPILOG = (
     "exit status: 0 done; 1 --source bag and some bag lost recorded data (corrupt chunks, "
     "missing split files, ...): its points come from what could be read, and every output is "
-    "written all the same; 2 bad input, or no usable point or model"
+    "written all the same; 2 bad input, or no usable point or model. "
+    "Ctrl-C cuts a sweep short: exit status 130 (a live sweep with --output saves the points "
+    "measured so far first)"
+    """
+
+examples:
+  # the plan of config/identify.yaml on the simulator: sweep.csv, fit.json, Fig. 9/10 in sweep/
+  feeder identify --output sweep
+  # a coarser grid at 40 %, and the speed model file the drive interface loads
+  feeder identify --frequencies 19:27:1 --amplitudes 40 --model-out speed_model.yaml
+  # the running demo cell's feeder (its 50 g parts), timed by its part sensors
+  feeder identify --source live --namespace /demo_cell/feeder_1 --masses 0.05 --output live
+  # the measured points fitted again, with other model orders
+  feeder identify --source csv sweep/sweep.csv --orders 1/2,1/3"""
 )
 PLAN_NAME = "identify.yaml"
 SOURCES = ("sim", "live", "bag", "csv")

@@ -33,6 +33,14 @@ EPILOG = (
     "short at a chunk boundary: total reported unknown); 1 some recorded messages lost (counted "
     "and listed: fewer readable than recorded, corrupt chunks, a chunk cut off by the end of a "
     "file, missing files); 2 not a bag"
+    """
+
+examples:
+  feeder info run1
+  # also decompress, CRC-check and decode everything
+  feeder info run1 --verify
+  # one file of the bag, as JSON
+  feeder info run1/run1_0.mcap --json"""
 )
 
 

@@ -2,7 +2,8 @@
 
 Thin: options are parsed here, the recording is :func:`feeder_ros.recording.record` (rclpy, raw
 subscriptions) writing through :class:`feeder_ros.bag.BagWriter` (rosbag2 bag, MCAP storage,
-chunked zstd by default). Ctrl-C or SIGTERM stop it cleanly; ``--duration`` stops it by itself.
+chunked zstd by default). Ctrl-C or SIGTERM stop it cleanly, its normal end (exit status 0, the bag
+closed); ``--duration`` stops it by itself.
 """
 
 from __future__ import annotations
@@ -16,9 +17,22 @@ from feeder_ros.cli.arguments import positive_float
 from feeder_ros.cli.main import CommandError
 from feeder_ros.cli.outputs import check_output_dir, output_path
 
-__all__ = ["HELP", "add_arguments", "run"]
+__all__ = ["EPILOG", "HELP", "add_arguments", "run"]
 
 HELP = "record feeder topics from the ROS graph into a rosbag2 (MCAP) bag"
+EPILOG = """\
+Ctrl-C: the normal way to end a recording (SIGTERM too, or --duration): the bag is closed,
+complete and readable, its summary printed, then exit status 0 (1 if the middleware's teardown
+hung, ended after 10 s; the bag is closed before it). A Ctrl-C before the bag exists (while the
+command starts) records nothing: exit status 130.
+
+examples:
+  # every topic of the demo cell's feeder (and /diagnostics) into run1, until Ctrl-C
+  feeder record --namespace /demo_cell/feeder_1 -o run1
+  # two topics (relative names are taken in --namespace), lz4 chunks
+  feeder record parts/state estimate --namespace /demo_cell/feeder_1 --compression lz4 -o run2
+  # one minute of everything, a new file every 512 MiB
+  feeder record --duration 60 --max-bag-size 512M -o run3"""
 _UNITS = {"": 1, "k": 1 << 10, "K": 1 << 10, "M": 1 << 20, "G": 1 << 30}
 _SIZE_MAX = 1 << 40  # bytes: a chunk or bag file this large is a typo
 

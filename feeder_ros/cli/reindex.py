@@ -27,6 +27,13 @@ EPILOG = (
     "still reports them. "
     "Exit status: 0 the bag is whole now; 1 some file left as it was (damaged) or recorded "
     "messages lost (counted and listed); 2 not a bag directory"
+    """
+
+examples:
+  # a bag whose recorder was killed: finish its last file, rewrite metadata.yaml, check it
+  feeder reindex run1 && feeder info run1 --verify
+  # only metadata.yaml, every .mcap file left as it is
+  feeder reindex run1 --metadata-only"""
 )
 
 

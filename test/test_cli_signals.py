@@ -1,0 +1,172 @@
+"""Ctrl-C and ``feeder``'s exit status, on real processes.
+
+``feeder cell`` and ``feeder record`` run until stopped: Ctrl-C is their normal end, exit status 0
+once the nodes are stopped / the bag is closed (readable). A command whose work Ctrl-C cuts short
+(``feeder sim`` mid-run) exits 130. Ctrl-C is sent as a terminal sends it: SIGINT to the whole
+process group (the command and the nodes it started). DDS is isolated by conftest (the session's
+own ROS_DOMAIN_ID, discovery on localhost only), which every process here inherits.
+"""
+
+from __future__ import annotations
+
+import os
+import signal
+import subprocess
+import sys
+import time
+from pathlib import Path
+
+import yaml
+from ros_test_tools import DrainedProcess, probe_node, wait_until
+
+from feeder_ros.bag import Bag, bag_info
+
+BIN = Path(sys.executable).parent
+FEEDER = str(BIN / "feeder")
+CONFIG = Path(__file__).resolve().parents[1] / "config"
+NS = "/sig_cell/feeder_1"
+
+
+def _one_feeder(tmp_path: Path) -> Path:
+    cell = {
+        "name": "sig_cell",
+        "feeders": [
+            {
+                "namespace": NS,
+                "nodes": {
+                    "platform_simulator": {
+                        "params_file": str(CONFIG / "platform_simulator.yaml"),
+                        "section": "platform_simulator_realistic",
+                        "parameters": {"imu_rate_hz": 200.0, "state_rate_hz": 50.0},
+                    },
+                    "manual_drive": {"parameters": {"frequency_hz": 20.0, "amplitude_n": 40.0}},
+                },
+            }
+        ],
+    }
+    path = tmp_path / "cell.yaml"
+    path.write_text(yaml.safe_dump({"cell": cell}), encoding="utf-8")
+    return path
+
+
+def _start(*args: str) -> DrainedProcess:
+    # its own process group, as a terminal's foreground job: Ctrl-C signals the whole group
+    return DrainedProcess([FEEDER, *args], start_new_session=True)
+
+
+def _ctrl_c(process: DrainedProcess, timeout_s: float = 60.0) -> int:
+    os.killpg(process.pid, signal.SIGINT)
+    try:
+        return process.wait(timeout=timeout_s)
+    except subprocess.TimeoutExpired:
+        raise AssertionError(f"did not stop on Ctrl-C:\n{process.output()[-3000:]}") from None
+
+
+def _stop(process: DrainedProcess) -> None:
+    if process.poll() is None:
+        os.killpg(process.pid, signal.SIGKILL)
+        process.wait()
+
+
+def _children(pid: int) -> set[int]:
+    result = subprocess.run(
+        ["ps", "-o", "pid=", "--ppid", str(pid)], capture_output=True, text=True, check=False
+    )
+    return {int(line) for line in result.stdout.split()}
+
+
+def _alive(pid: int) -> bool:
+    stat = Path(f"/proc/{pid}/stat")
+    try:
+        return stat.read_text().split()[2] != "Z"
+    except (FileNotFoundError, ProcessLookupError, IndexError):
+        return False
+
+
+def test_ctrl_c_ends_a_recording_and_a_running_cell_with_exit_status_0(tmp_path: Path) -> None:
+    bag = tmp_path / "run1"
+    cell = _start("cell", "--config", str(_one_feeder(tmp_path)))
+    recorder: DrainedProcess | None = None
+    try:
+        with probe_node() as node:
+
+            def publishing() -> bool:
+                topics = dict(node.get_topic_names_and_types())
+                return f"{NS}/carrier/state" in topics and f"{NS}/drive/command" in topics
+
+            assert wait_until(publishing, 60.0), cell.output()[-3000:]
+        nodes = _children(cell.pid)
+        assert len(nodes) == 2
+
+        recorder = _start("record", "--namespace", NS, "-o", str(bag))
+        assert wait_until(lambda: "recording into" in recorder.output(), 60.0), recorder.output()
+        # discovery of the topics (every second), then seconds of data
+        assert wait_until(lambda: f"recording {NS}/carrier/state" in recorder.output(), 30.0)
+        time.sleep(3.0)
+        assert _ctrl_c(recorder) == 0, recorder.output()[-3000:]
+        output = recorder.output()
+        assert "stopped by signal" in output
+        assert "Traceback" not in output
+        info = bag_info(Bag(bag), verify=True)  # closed: complete and readable
+        assert not info.cut_short
+        assert info.problems == []
+        assert info.topics[f"{NS}/carrier/state"].message_count > 20
+        assert not info.lost_data()
+
+        assert _ctrl_c(cell) == 0, cell.output()[-3000:]
+        output = cell.output()
+        assert "[cell] stopping" in output
+        assert "feeder: interrupted" not in output
+        assert wait_until(lambda: not any(_alive(pid) for pid in nodes), 30.0)
+    finally:
+        _stop(cell)
+        if recorder is not None:
+            _stop(recorder)
+
+
+def test_ctrl_c_while_a_composed_cell_starts_stops_it_with_exit_status_0(tmp_path: Path) -> None:
+    # the cell's first line printed, its nodes' modules (rclpy, numba, ...) still loading: the
+    # Ctrl-C stops the cell as it would once the nodes run
+    cell = _start("cell", "--composed", "--config", str(_one_feeder(tmp_path)))
+    try:
+        assert wait_until(lambda: "[cell] sig_cell: 2 nodes" in cell.output(), 120.0), (
+            cell.output()[-3000:]
+        )
+        assert _ctrl_c(cell) == 0, cell.output()[-3000:]
+        output = cell.output()
+        assert "[cell] stopped" in output
+        assert "Traceback" not in output
+        assert "feeder: interrupted" not in output
+    finally:
+        _stop(cell)
+
+
+def test_ctrl_c_in_the_middle_of_a_simulation_is_exit_status_130(tmp_path: Path) -> None:
+    out = tmp_path / "run.csv"
+    # the logistic model's ODE solver: minutes for this run; the progress bar shows it started
+    logistic = ["--set", "stiffness_model=logistic", "--set", "drive_amplitude_n=40"]
+    command = [FEEDER, "sim", *logistic, "--duration", "2000", "--progress", "--output", str(out)]
+    sim = subprocess.Popen(command, stderr=subprocess.PIPE, start_new_session=True)
+    assert sim.stderr is not None
+    stderr = b""
+    try:
+        # read as it comes: the bar is redrawn after a carriage return, with no newline
+        os.set_blocking(sim.stderr.fileno(), False)
+        deadline = time.monotonic() + 120.0
+        while b"simulating [" not in stderr and time.monotonic() < deadline:
+            stderr += sim.stderr.read() or b""
+            time.sleep(0.05)
+        assert b"simulating [" in stderr, stderr.decode()[-3000:]
+        os.killpg(sim.pid, signal.SIGINT)
+        os.set_blocking(sim.stderr.fileno(), True)
+        stderr += sim.stderr.read()
+        assert sim.wait(timeout=60) == 130, stderr.decode()[-3000:]
+        text = stderr.decode()
+        assert text.endswith("feeder: interrupted\n"), text[-3000:]
+        assert "Traceback" not in text
+        assert not out.exists()  # nothing half-written
+    finally:
+        if sim.poll() is None:
+            os.killpg(sim.pid, signal.SIGKILL)
+            sim.wait()
+        sim.stderr.close()
