@@ -231,3 +231,35 @@ def running(
 
 def python_command(*args: str) -> list[str]:
     return [sys.executable, *args]
+
+
+def demo_cell_file(
+    tmp_path: Path,
+    namespace: str,
+    *,
+    without: Sequence[str] = (),
+    parameters: dict[str, dict[str, Any]] | None = None,
+    name: str | None = None,
+) -> Path:
+    """config/cell.yaml's feeder under ``namespace``, its parameter files named by absolute path,
+    the nodes in ``without`` left out and ``parameters`` (node -> parameters) merged over the
+    cell's (a nested dict replaces the cell's whole entry); written to ``tmp_path``."""
+    import yaml  # (only the cell tests need it)
+
+    config = REPO / "config"
+    tree = yaml.safe_load((config / "cell.yaml").read_text(encoding="utf-8"))
+    if name is not None:
+        tree["cell"]["name"] = name
+    [feeder] = tree["cell"]["feeders"]
+    feeder["namespace"] = namespace
+    nodes = feeder["nodes"]
+    for node in without:
+        del nodes[node]
+    for spec in nodes.values():
+        if "params_file" in spec:
+            spec["params_file"] = str(config / spec["params_file"])
+    for node, values in (parameters or {}).items():
+        nodes[node].setdefault("parameters", {}).update(values)
+    path = tmp_path / "cell.yaml"
+    path.write_text(yaml.safe_dump(tree), encoding="utf-8")
+    return path

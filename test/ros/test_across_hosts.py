@@ -20,10 +20,8 @@ from dataclasses import dataclass
 from pathlib import Path
 
 import pytest
-import yaml
-from ros_test_tools import running
+from ros_test_tools import demo_cell_file, running
 
-CONFIG = Path(__file__).resolve().parents[2] / "config"
 BIN = Path(sys.executable).parent
 NAMESPACE = "/plant/feeder_1"
 
@@ -74,20 +72,6 @@ def _received_bytes(ns: str, link: str) -> int:
     return int(stats[0]["stats64"]["rx"]["bytes"])
 
 
-def _cell_file(tmp_path: Path) -> Path:
-    """The demo cell under NAMESPACE, its parameter files named by absolute path."""
-    cell = yaml.safe_load((CONFIG / "cell.yaml").read_text())["cell"]
-    [feeder] = cell["feeders"]
-    feeder["namespace"] = NAMESPACE
-    for spec in feeder["nodes"].values():
-        if "params_file" in spec:
-            spec["params_file"] = str(CONFIG / spec["params_file"])
-    cell["name"] = "plant"
-    path = tmp_path / "cell.yaml"
-    path.write_text(yaml.safe_dump({"cell": cell}))
-    return path
-
-
 def test_a_controller_on_another_host_drives_the_feeder_and_sees_its_estimate(
     tmp_path: Path,
 ) -> None:
@@ -97,7 +81,7 @@ def test_a_controller_on_another_host_drives_the_feeder_and_sees_its_estimate(
     timeline = tmp_path / "timeline.json"
     with two_hosts() as hosts:
         cell = ["ip", "netns", "exec", hosts.feeder_ns, str(BIN / "feeder"), "cell",
-                "--config", str(_cell_file(tmp_path))]  # fmt: skip
+                "--config", str(demo_cell_file(tmp_path, NAMESPACE, name="plant"))]  # fmt: skip
         controller = [
             "ip", "netns", "exec", hosts.controller_ns, str(BIN / "cell_controller"),
             "--namespace", NAMESPACE, "--hold", "4", "--timeline", str(timeline),

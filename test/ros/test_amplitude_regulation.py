@@ -28,14 +28,13 @@ from typing import Any
 import numpy as np
 import pytest
 import rclpy
-import yaml
 from rcl_interfaces.msg import Parameter as ParameterMsg
 from rcl_interfaces.msg import ParameterType, ParameterValue
 from rcl_interfaces.srv import GetParameters, SetParameters
 from rclpy.context import Context
 from rclpy.parameter import Parameter
 from rclpy.qos import QoSProfile, ReliabilityPolicy
-from ros_test_tools import DrainedProcess, call, probe_node, wait_until
+from ros_test_tools import DrainedProcess, call, demo_cell_file, probe_node, wait_until
 
 from feeder_ros.cell import load_cell, parameters_document
 from feeder_ros.cli.cell import node_executables
@@ -57,7 +56,6 @@ from feeder_ros.sensors.accelerometer import AccelerometerModel
 from feeder_ros.srv import SetDrive, SetVibrationAmplitude
 
 BIN = Path(sys.executable).parent
-CONFIG = Path(__file__).resolve().parents[2] / "config"
 NS = "/amplitude_cell/feeder_1"
 F_HZ = 30.0
 START_PERCENT = 40.0  # set_drive's amplitude: the loop's starting point
@@ -357,35 +355,22 @@ class Wire:
         return float(inside.mean())
 
 
-def _cell_file(tmp_path: Path) -> Path:
-    tree = yaml.safe_load((CONFIG / "cell.yaml").read_text(encoding="utf-8"))
-    feeder = tree["cell"]["feeders"][0]
-    feeder["namespace"] = NS
-    nodes = feeder["nodes"]
-    for name in ("vehicle_estimator", "speed_monitor"):
-        del nodes[name]
-    for spec in nodes.values():
-        if "params_file" in spec:
-            spec["params_file"] = str(CONFIG / spec["params_file"])
-    nodes["drive_interface"]["parameters"].update(
-        {
-            "speed_model_enabled": False,
-            "speed_trim": {"enabled": False},
-            "max_amplitude_percent": MAX_PERCENT,
-            # the demo cell publishes its accelerometer in batches
-            "amplitude": {"enabled": False, "imu_topic": "imu/batch", "imu_type": "imu_batch"},
-        }
-    )
-    path = tmp_path / "cell.yaml"
-    path.write_text(yaml.safe_dump(tree), encoding="utf-8")
-    return path
-
-
 @contextlib.contextmanager
 def amplitude_cell(tmp_path: Path) -> Iterator[tuple[Any, Wire, CellController]]:
     """Simulator and drive interface as processes, the drive configured, active and started at
     30 Hz / START_PERCENT (regulation off); yields the probe, what it heard and the controller."""
-    cell = load_cell(_cell_file(tmp_path), node_executables())
+    drive = {
+        "speed_model_enabled": False,
+        "speed_trim": {"enabled": False},
+        "max_amplitude_percent": MAX_PERCENT,
+    }
+    cell_file = demo_cell_file(
+        tmp_path,
+        NS,
+        without=("vehicle_estimator", "speed_monitor"),
+        parameters={"drive_interface": drive},
+    )
+    cell = load_cell(cell_file, node_executables())
     parameters = tmp_path / "parameters.yaml"
     parameters.write_text(parameters_document(cell), encoding="utf-8")
     processes = {

@@ -19,9 +19,8 @@ from pathlib import Path
 from typing import Any
 
 import pytest
-import yaml
 from diagnostic_msgs.msg import DiagnosticArray, DiagnosticStatus
-from ros_test_tools import DrainedProcess, probe_node, wait_until
+from ros_test_tools import DrainedProcess, demo_cell_file, probe_node, wait_until
 
 from feeder_ros.cell import NodeLaunch, load_cell, parameters_document
 from feeder_ros.cli.cell import node_executables
@@ -30,7 +29,6 @@ from feeder_ros.msg import DriveState, SpeedStatus
 from feeder_ros.srv import SetDrive
 
 BIN = Path(sys.executable).parent
-CONFIG = Path(__file__).resolve().parents[2] / "config"
 ERROR = int.from_bytes(DiagnosticStatus.ERROR, "little")
 
 
@@ -77,7 +75,9 @@ class FaultCell:
 
     def __init__(self, tmp_path: Path, namespace: str) -> None:
         self.namespace = namespace
-        cell_file = _cell_file(tmp_path, namespace)
+        # a fixed set point: nothing to compute at configure
+        drive = {"speed_model_enabled": False}
+        cell_file = demo_cell_file(tmp_path, namespace, parameters={"drive_interface": drive})
         cell = load_cell(cell_file, node_executables())
         self.parameters_file = tmp_path / "parameters.yaml"
         self.parameters_file.write_text(parameters_document(cell), encoding="utf-8")
@@ -109,20 +109,6 @@ class FaultCell:
 
     def status_name(self, node: str, what: str) -> str:
         return f"{self.namespace}/{node}: {what}"
-
-
-def _cell_file(tmp_path: Path, namespace: str) -> Path:
-    tree = yaml.safe_load((CONFIG / "cell.yaml").read_text(encoding="utf-8"))
-    feeder = tree["cell"]["feeders"][0]
-    feeder["namespace"] = namespace
-    for spec in feeder["nodes"].values():
-        if "params_file" in spec:
-            spec["params_file"] = str(CONFIG / spec["params_file"])
-    drive = feeder["nodes"]["drive_interface"]["parameters"]
-    drive["speed_model_enabled"] = False  # a fixed set point: nothing to compute at configure
-    path = tmp_path / "cell.yaml"
-    path.write_text(yaml.safe_dump(tree), encoding="utf-8")
-    return path
 
 
 @contextlib.contextmanager

@@ -20,10 +20,9 @@ from pathlib import Path
 from typing import Any
 
 import pytest
-import yaml
 from diagnostic_msgs.msg import DiagnosticArray
 from rclpy.action.client import ActionClient
-from ros_test_tools import DrainedProcess, call, probe_node, wait_until
+from ros_test_tools import DrainedProcess, call, demo_cell_file, probe_node, wait_until
 from std_srvs.srv import Trigger
 
 from feeder_ros.action import FeedParts
@@ -34,7 +33,6 @@ from feeder_ros.msg import DriveState, PartSensorEvent, PartStateArray
 from feeder_ros.srv import SetDrive
 
 BIN = Path(sys.executable).parent
-CONFIG = Path(__file__).resolve().parents[2] / "config"
 RAMP_S = 0.5  # the set point's ramp; the drive's amplitude rate limit (50 %/s) makes 1.2 s of 60 %
 STOP_RAMP_S = 60.0 / 50.0
 
@@ -72,27 +70,6 @@ class Wire:
             return self.states[-1][1] if self.states else None
 
 
-def _cell_file(
-    tmp_path: Path, namespace: str, simulator: dict[str, Any], drive: dict[str, Any]
-) -> Path:
-    tree = yaml.safe_load((CONFIG / "cell.yaml").read_text(encoding="utf-8"))
-    feeder = tree["cell"]["feeders"][0]
-    feeder["namespace"] = namespace
-    nodes = feeder["nodes"]
-    for name in ("vehicle_estimator", "speed_monitor"):
-        del nodes[name]
-    for spec in nodes.values():
-        if "params_file" in spec:
-            spec["params_file"] = str(CONFIG / spec["params_file"])
-    nodes["platform_simulator"]["parameters"].update(simulator)
-    nodes["drive_interface"]["parameters"].update(
-        {"speed_model_enabled": False, "speed_trim": {"enabled": False}, **drive}
-    )
-    path = tmp_path / "cell.yaml"
-    path.write_text(yaml.safe_dump(tree), encoding="utf-8")
-    return path
-
-
 @contextlib.contextmanager
 def feeding_cell(
     tmp_path: Path,
@@ -103,7 +80,20 @@ def feeding_cell(
     """Simulator and drive interface as processes, the drive configured and active at 30 Hz /
     60 % (not started); yields the probe, what it heard, the controller and a feed_parts client."""
     cell = load_cell(
-        _cell_file(tmp_path, namespace, simulator or {}, drive or {}), node_executables()
+        demo_cell_file(
+            tmp_path,
+            namespace,
+            without=("vehicle_estimator", "speed_monitor"),
+            parameters={
+                "platform_simulator": simulator or {},
+                "drive_interface": {
+                    "speed_model_enabled": False,
+                    "speed_trim": {"enabled": False},
+                    **(drive or {}),
+                },
+            },
+        ),
+        node_executables(),
     )
     parameters = tmp_path / "parameters.yaml"
     parameters.write_text(parameters_document(cell), encoding="utf-8")
