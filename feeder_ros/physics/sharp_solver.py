@@ -845,6 +845,23 @@ def _part_samples(
                 out_pp[i, j] = ph
 
 
+STUCK_REPEATS = 1000  # events in a row at one instant (no exit among them): the run is stuck
+
+
+@njit(cache=True, inline="always")
+def _count_repeat(zero_count, repeated, kind):
+    """The stuck counter shared by :func:`advance` and :func:`_march_group`. ``zero_count`` is the
+    number of events in a row found at the very start of their (sub-)piece, no time having passed
+    since the event before; ``repeated`` says the event of kind ``kind`` (an ``F_*`` code) is one
+    more such. An exit always progresses (one part fewer) and, like any event after a positive
+    time, resets the count. Returns the new count and True when the run is stuck (more than
+    ``STUCK_REPEATS`` repeats in a row); the caller then returns ``STATUS_STUCK``."""
+    if repeated and kind != F_EXIT:
+        zero_count += 1
+        return zero_count, zero_count > STUCK_REPEATS
+    return 0, False
+
+
 @njit(cache=True)
 def advance(
     model,
@@ -1402,13 +1419,10 @@ def advance(
             break
 
         # ---- one event at te (exits always progress: they do not count as repeats)
-        if tau_e == ts and f_kind[hit] != F_EXIT:
-            zero_count += 1
-            if zero_count > 1000:
-                counters[2] = STATUS_STUCK
-                return STATUS_STUCK
-        else:
-            zero_count = 0
+        zero_count, stuck = _count_repeat(zero_count, tau_e == ts, f_kind[hit])
+        if stuck:
+            counters[2] = STATUS_STUCK
+            return STATUS_STUCK
         kind = f_kind[hit]
         if kind == F_BRANCH:
             if switch == 0:
@@ -2277,12 +2291,9 @@ def _march_group(
             if hit < 0:
                 break
             at_ts = True
-            if se == 0.0 and f_kind[hit] != F_EXIT:
-                zero_count += 1
-                if zero_count > 1000:
-                    return STATUS_STUCK
-            else:
-                zero_count = 0
+            zero_count, stuck = _count_repeat(zero_count, se == 0.0, f_kind[hit])
+            if stuck:
+                return STATUS_STUCK
             te = t0 + tau_e
             kind = f_kind[hit]
             n = ev_n[g]
