@@ -845,6 +845,42 @@ def _part_samples(
                 out_pp[i, j] = ph
 
 
+@njit(cache=True, inline="always")
+def _exit_lead(
+    g, te, xe, g_y, g_slip, g_mass, g_lead, g_head, m_group, m_next, m_o, m_mass, m_slip0,
+    m_exit_t,
+):  # fmt: skip
+    """The track-end event of group ``g`` at time ``te``, the carrier at ``xe``, shared by both
+    loops: the member furthest along (largest offset ``m_o``, the first in list order on a tie)
+    leaves. It is unlinked from the group's list and keeps its exit values (``m_slip0`` its slip
+    time, ``m_o`` its lab position ``m_o + g_y + xe``, ``m_exit_t`` the time, ``m_group`` -1); the
+    group loses its mass and, if members remain, takes its lead again. Returns the part's index
+    (the caller logs the exit)."""
+    lead_i = -1
+    i = g_head[g]
+    while i >= 0:
+        if lead_i < 0 or m_o[i] > m_o[lead_i]:
+            lead_i = i
+        i = m_next[i]
+    # unlink lead_i
+    if g_head[g] == lead_i:
+        g_head[g] = m_next[lead_i]
+    else:
+        i = g_head[g]
+        while m_next[i] != lead_i:
+            i = m_next[i]
+        m_next[i] = m_next[lead_i]
+    m_next[lead_i] = -1
+    m_slip0[lead_i] = g_slip[g] - m_slip0[lead_i]
+    m_exit_t[lead_i] = te
+    m_o[lead_i] = m_o[lead_i] + g_y[g] + xe  # lab position at exit
+    m_group[lead_i] = -1
+    g_mass[g] -= m_mass[lead_i]
+    if g_head[g] >= 0:
+        g_lead[g] = _group_lead(g, g_head, m_next, m_o)
+    return lead_i
+
+
 STUCK_REPEATS = 1000  # events in a row at one instant (no exit among them): the run is stuck
 
 
@@ -1496,29 +1532,10 @@ def advance(
                 if log_events:
                     _log_group(ev_t, ev_kind, ev_part, counters, te, EV_REVERSAL, g, g_head, m_next)
         elif kind == F_EXIT:
-            g = f_group[hit]
-            lead_i = -1
-            i = g_head[g]
-            while i >= 0:
-                if lead_i < 0 or m_o[i] > m_o[lead_i]:
-                    lead_i = i
-                i = m_next[i]
-            # unlink lead_i
-            if g_head[g] == lead_i:
-                g_head[g] = m_next[lead_i]
-            else:
-                i = g_head[g]
-                while m_next[i] != lead_i:
-                    i = m_next[i]
-                m_next[i] = m_next[lead_i]
-            m_next[lead_i] = -1
-            m_slip0[lead_i] = g_slip[g] - m_slip0[lead_i]
-            m_exit_t[lead_i] = te
-            m_o[lead_i] = m_o[lead_i] + g_y[g] + xe  # lab position at exit
-            m_group[lead_i] = -1
-            g_mass[g] -= m_mass[lead_i]
-            if g_head[g] >= 0:
-                g_lead[g] = _group_lead(g, g_head, m_next, m_o)
+            lead_i = _exit_lead(
+                f_group[hit], te, xe, g_y, g_slip, g_mass, g_lead, g_head, m_group, m_next, m_o,
+                m_mass, m_slip0, m_exit_t,
+            )  # fmt: skip
             if log_events:
                 _log(ev_t, ev_kind, ev_part, counters, te, EV_EXIT, lead_i)
         if not two_way and not record and kind >= F_STICK_UP:
@@ -2316,31 +2333,14 @@ def _march_group(
                 ev_part[g, n] = -1
                 ev_n[g] = n + 1
             else:
-                lead_i = -1
-                i = g_head[g]
-                while i >= 0:
-                    if lead_i < 0 or m_o[i] > m_o[lead_i]:
-                        lead_i = i
-                    i = m_next[i]
-                if g_head[g] == lead_i:
-                    g_head[g] = m_next[lead_i]
-                else:
-                    i = g_head[g]
-                    while m_next[i] != lead_i:
-                        i = m_next[i]
-                    m_next[i] = m_next[lead_i]
-                m_next[lead_i] = -1
-                m_slip0[lead_i] = g_slip[g] - m_slip0[lead_i]
-                m_exit_t[lead_i] = te
-                m_o[lead_i] = m_o[lead_i] + g_y[g] + xe
-                m_group[lead_i] = -1
-                g_mass[g] -= m_mass[lead_i]
+                lead_i = _exit_lead(
+                    g, te, xe, g_y, g_slip, g_mass, g_lead, g_head, m_group, m_next, m_o, m_mass,
+                    m_slip0, m_exit_t,
+                )  # fmt: skip
                 for j in range(ns, n_samples):
                     out_px[j, lead_i] = np.nan
                     out_pv[j, lead_i] = np.nan
                     out_pp[j, lead_i] = EXITED
-                if g_head[g] >= 0:
-                    g_lead[g] = _group_lead(g, g_head, m_next, m_o)
                 ev_t[g, n] = te
                 ev_kind[g, n] = EV_EXIT
                 ev_part[g, n] = lead_i
