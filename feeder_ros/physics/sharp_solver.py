@@ -881,6 +881,23 @@ def _exit_lead(
     return lead_i
 
 
+@njit(cache=True, inline="always")
+def _end_group(g, se, xs, xe, ve, g_phase, g_D, g_u, g_y, g_slip):
+    """Group ``g`` at the end of a (sub-)piece, shared by both loops: ``se`` is the time since the
+    origin ``ts`` of the part's polynomials, over which the carrier moved from ``xs`` to ``xe``,
+    and ``ve`` the carrier's velocity at the end. A sticking group takes the carrier's velocity;
+    a slipping one, with the constant acceleration ``+D`` (slipping backward) or ``-D`` (forward),
+    moves on the carrier by its own travel less the carrier's, speeds up and adds ``se`` to its
+    slip time. The phase itself is left to the event that follows."""
+    if g_phase[g] == STICK:
+        g_u[g] = ve
+    else:
+        ap = g_D[g] if g_phase[g] == SLIP_BACKWARD else -g_D[g]
+        g_y[g] += se * (g_u[g] + 0.5 * ap * se) - (xe - xs)
+        g_u[g] += ap * se
+        g_slip[g] += se
+
+
 STUCK_REPEATS = 1000  # events in a row at one instant (no exit among them): the run is stuck
 
 
@@ -1425,16 +1442,8 @@ def advance(
         dFe = A * w * cs
         te = t0 + tau_e
         for g in range(n_groups):
-            if g_head[g] < 0:
-                continue
-            if g_phase[g] == STICK:
-                g_u[g] = ve
-            else:
-                ap = g_D[g] if g_phase[g] == SLIP_BACKWARD else -g_D[g]
-                se = tau_e - ts
-                g_y[g] += se * (g_u[g] + 0.5 * ap * se) - (xe - xs)
-                g_u[g] += ap * se
-                g_slip[g] += se
+            if g_head[g] >= 0:
+                _end_group(g, tau_e - ts, xs, xe, ve, g_phase, g_D, g_u, g_y, g_slip)
         if record and tau_e > 0.0:
             _record_piece(
                 pieces, counters[4], t0, tau_e, sigma, lam, root, r1, w, phi, mode, rows, xe, ve, ae
@@ -2299,12 +2308,7 @@ def _march_group(
                 ve = pieces[k, P_VE]
                 ae = pieces[k, P_AE]
             se = tau_e - ts
-            if ph == STICK:
-                g_u[g] = ve
-            else:
-                g_y[g] += se * (g_u[g] + 0.5 * ap * se) - (xe - xs)
-                g_u[g] += ap * se
-                g_slip[g] += se
+            _end_group(g, se, xs, xe, ve, g_phase, g_D, g_u, g_y, g_slip)
             if hit < 0:
                 break
             at_ts = True
