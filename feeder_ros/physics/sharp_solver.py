@@ -898,6 +898,52 @@ def _end_group(g, se, xs, xe, ve, g_phase, g_D, g_u, g_y, g_slip):
         g_slip[g] += se
 
 
+@njit(cache=True, inline="always")
+def _stick_functions(i, limit, f_kind, f_row, f_sgn, f_c0, f_c1, f_c2):
+    """The stick limits of sticking parts at slots ``i`` and ``i + 1`` of the event functions,
+    shared by both loops: ``limit - x''`` (F_STICK_UP: the carrier accelerates forward past
+    ``limit``, the parts slip backward) and ``limit + x''`` (F_STICK_DOWN). ``limit`` is the
+    sticking group's ``L`` in the group march, the smallest ``L`` of the sticking groups in the
+    global loop."""
+    f_kind[i] = F_STICK_UP
+    f_row[i] = 2
+    f_sgn[i] = -1.0
+    f_c0[i] = limit
+    f_c1[i] = 0.0
+    f_c2[i] = 0.0
+    f_kind[i + 1] = F_STICK_DOWN
+    f_row[i + 1] = 2
+    f_sgn[i + 1] = 1.0
+    f_c0[i + 1] = limit
+    f_c1[i + 1] = 0.0
+    f_c2[i + 1] = 0.0
+
+
+@njit(cache=True, inline="always")
+def _slip_functions(
+    i, g, track, xs, g_phase, g_D, g_u, g_y, g_lead, f_kind, f_row, f_sgn, f_c0, f_c1, f_c2
+):  # fmt: skip
+    """The event functions of slipping group ``g`` at slots ``i`` and ``i + 1``, shared by both
+    loops, in the local time ``s`` since the sub-piece's start (carrier at ``xs``): its relative
+    velocity ``s_g*(x' - u) - D*s`` (F_RELVEL; ``s_g`` = +1 slipping backward, -1 forward: the
+    part's acceleration is ``s_g*D``) and its distance to the track end ``track - lead - y(s)``,
+    ``y(s) = y + u*s + s_g*D*s^2/2 - (x - xs)`` (F_EXIT)."""
+    s_g = 1.0 if g_phase[g] == SLIP_BACKWARD else -1.0
+    ap = s_g * g_D[g]
+    f_kind[i] = F_RELVEL
+    f_row[i] = 1
+    f_sgn[i] = s_g
+    f_c0[i] = -s_g * g_u[g]
+    f_c1[i] = -g_D[g]
+    f_c2[i] = 0.0
+    f_kind[i + 1] = F_EXIT
+    f_row[i + 1] = 0
+    f_sgn[i + 1] = 1.0
+    f_c0[i + 1] = track - g_lead[g] - g_y[g] - xs
+    f_c1[i + 1] = -g_u[g]
+    f_c2[i + 1] = -0.5 * ap
+
+
 STUCK_REPEATS = 1000  # events in a row at one instant (no exit among them): the run is stuck
 
 
@@ -1155,39 +1201,16 @@ def advance(
                     f_c2[nf] = 0.0
                     nf += 1
             else:
-                s_g = 1.0 if g_phase[g] == SLIP_BACKWARD else -1.0
-                ap = s_g * g_D[g]
-                f_kind[nf] = F_RELVEL
+                _slip_functions(
+                    nf, g, track, xs, g_phase, g_D, g_u, g_y, g_lead, f_kind, f_row, f_sgn, f_c0,
+                    f_c1, f_c2,
+                )  # fmt: skip
                 f_group[nf] = g
-                f_row[nf] = 1
-                f_sgn[nf] = s_g
-                f_c0[nf] = -s_g * g_u[g]
-                f_c1[nf] = -g_D[g]
-                f_c2[nf] = 0.0
-                nf += 1
-                f_kind[nf] = F_EXIT
-                f_group[nf] = g
-                f_row[nf] = 0
-                f_sgn[nf] = 1.0
-                f_c0[nf] = track - g_lead[g] - g_y[g] - xs
-                f_c1[nf] = -g_u[g]
-                f_c2[nf] = -0.5 * ap
-                nf += 1
+                f_group[nf + 1] = g
+                nf += 2
         if lmin < np.inf:
-            f_kind[nf] = F_STICK_UP
-            f_row[nf] = 2
-            f_sgn[nf] = -1.0
-            f_c0[nf] = lmin
-            f_c1[nf] = 0.0
-            f_c2[nf] = 0.0
-            nf += 1
-            f_kind[nf] = F_STICK_DOWN
-            f_row[nf] = 2
-            f_sgn[nf] = 1.0
-            f_c0[nf] = lmin
-            f_c1[nf] = 0.0
-            f_c2[nf] = 0.0
-            nf += 1
+            _stick_functions(nf, lmin, f_kind, f_row, f_sgn, f_c0, f_c1, f_c2)
+            nf += 2
 
         # ---- release functions that start on (or across) their zero (at ts; the part's
         # polynomials are in s = tau - ts)
@@ -1779,16 +1802,7 @@ def _march_group(
                 g_u[g] = vs
             nf = 0
             if ph == STICK:
-                f_kind[0] = F_STICK_UP
-                f_row[0] = 2
-                f_sgn[0] = -1.0
-                f_kind[1] = F_STICK_DOWN
-                f_row[1] = 2
-                f_sgn[1] = 1.0
-                for i in range(2):
-                    f_c0[i] = L
-                    f_c1[i] = 0.0
-                    f_c2[i] = 0.0
+                _stick_functions(0, L, f_kind, f_row, f_sgn, f_c0, f_c1, f_c2)
                 nf = 2
                 if g_lead[g] + g_y[g] >= track:
                     # a sticking part past the track end (put there, or the track shortened)
@@ -1797,19 +1811,10 @@ def _march_group(
                     f_c0[0] = track - g_lead[g] - g_y[g]
                     nf = 1
             else:
-                s_g = 1.0 if ph == SLIP_BACKWARD else -1.0
-                f_kind[0] = F_RELVEL
-                f_row[0] = 1
-                f_sgn[0] = s_g
-                f_c0[0] = -s_g * g_u[g]
-                f_c1[0] = -D
-                f_c2[0] = 0.0
-                f_kind[1] = F_EXIT
-                f_row[1] = 0
-                f_sgn[1] = 1.0
-                f_c0[1] = track - g_lead[g] - g_y[g] - xs
-                f_c1[1] = -g_u[g]
-                f_c2[1] = -0.5 * s_g * D
+                _slip_functions(
+                    0, g, track, xs, g_phase, g_D, g_u, g_y, g_lead, f_kind, f_row, f_sgn, f_c0,
+                    f_c1, f_c2,
+                )  # fmt: skip
                 nf = 2
             rem = T - ts
             hit = -1
