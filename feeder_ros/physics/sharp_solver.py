@@ -944,6 +944,50 @@ def _slip_functions(
     f_c2[i + 1] = -0.5 * ap
 
 
+@njit(cache=True, inline="always")
+def _bound_terms(rows, lo, hi, lam, root, r_abs_a, r_abs_b, r_amp, r_R):
+    """The certified search's per-row bound data of rows ``lo .. hi-1``, shared by both loops
+    and taken once per piece: ``|alpha|`` and ``|beta|`` (the homogeneous coefficients), the
+    drive sinusoid's amplitude, and the under-damped amplitude form ``sqrt(alpha^2 +
+    (beta/root)^2)`` (inf otherwise). :func:`_bound_of_row` turns them into a row's bound."""
+    for r in range(lo, hi):
+        r_abs_a[r] = abs(rows[r, 0])
+        r_abs_b[r] = abs(rows[r, 1])
+        r_amp[r] = math.sqrt(rows[r, 2] * rows[r, 2] + rows[r, 3] * rows[r, 3])
+        r_R[r] = np.inf
+        if lam < 0.0:
+            r_R[r] = math.sqrt(rows[r, 0] ** 2 + (rows[r, 1] / root) ** 2)
+
+
+@njit(cache=True, inline="always")
+def _bound_of_row(rows, r, bc, bs, r_abs_a, r_abs_b, r_amp, r_R):
+    """A bound of ``|row r|`` over ``[tau, inf)`` from the basis bounds ``bc, bs`` there and the
+    data of :func:`_bound_terms`, shared by both loops. Returns the homogeneous terms' bound (the
+    smaller of the coefficient-wise and the amplitude form) and the whole row's (plus the drive's
+    amplitude and the constant)."""
+    bh = r_abs_a[r] * bc + r_abs_b[r] * bs
+    bR = r_R[r] * bc
+    hb = bh if bh < bR else bR
+    return hb, hb + r_amp[r] + abs(rows[r, 4])
+
+
+@njit(cache=True, inline="always")
+def _certified_step(f, s, sg, c0, c1, c2, r, vals, bnds, h_cap):
+    """One function's test at a stop of the certified search, shared by both loops: the event
+    function ``f = sg*row_r + c0 + c1*s + c2*s^2`` (``f`` evaluated by the caller) at the local
+    time ``s`` of its polynomial, with the rows' values ``vals`` and bounds ``bnds`` there.
+    Returns ``(-1.0, 0.0)`` when ``f`` is at or below its round-off (an event now), else the
+    safe step of :func:`_step` (at most ``h_cap``) and the slope ``f'``."""
+    scale = abs(sg) * bnds[r] + abs(c0) + s * abs(c1)
+    scale += s * s * abs(c2)
+    if f <= 64.0 * EPS * scale:
+        return -1.0, 0.0
+    d = sg * vals[r + 1] + c1 + 2.0 * s * c2
+    B = abs(sg) * bnds[r + 2] + 2.0 * abs(c2)
+    f2 = sg * vals[r + 2] + 2.0 * c2
+    return _step(f, d, B, f2, abs(sg) * bnds[r + 3], h_cap), d
+
+
 STUCK_REPEATS = 1000  # events in a row at one instant (no exit among them): the run is stuck
 
 
@@ -1269,13 +1313,7 @@ def advance(
             for i in range(nf):
                 if not f_zero[i] and f_row[i] + 4 > hi_r:
                     hi_r = f_row[i] + 4
-        for r in range(lo, hi_r):
-            r_abs_a[r] = abs(rows[r, 0])
-            r_abs_b[r] = abs(rows[r, 1])
-            r_amp[r] = math.sqrt(rows[r, 2] * rows[r, 2] + rows[r, 3] * rows[r, 3])
-            r_R[r] = np.inf
-            if lam < 0.0:
-                r_R[r] = math.sqrt(rows[r, 0] ** 2 + (rows[r, 1] / root) ** 2)
+        _bound_terms(rows, lo, hi_r, lam, root, r_abs_a, r_abs_b, r_amp, r_R)
         tau = ts
         e_cc, e_ss, e_sn, e_cs, e_bc, e_bs = cc, ss, sn, cs, bc, bs
         e_chain = chain
@@ -1311,10 +1349,9 @@ def advance(
                 if new_bounds:
                     new_bounds = False
                     for r in range(lo, hi_r):
-                        bh = r_abs_a[r] * bc + r_abs_b[r] * bs
-                        bR = r_R[r] * bc
-                        hbnds[r] = bh if bh < bR else bR
-                        bnds[r] = hbnds[r] + r_amp[r] + abs(rows[r, 4])
+                        hb, bt = _bound_of_row(rows, r, bc, bs, r_abs_a, r_abs_b, r_amp, r_R)
+                        hbnds[r] = hb
+                        bnds[r] = bt
                 t_res = 8.0 * EPS * (abs(t0) + tau + 1e-3)
                 # the next stop: each function is provably positive before f_skip[i] (its release
                 # offset, or the end of its last safe step), so only the functions whose interval
@@ -1332,15 +1369,12 @@ def advance(
                     sp = tau - ts
                     poly = f_c0[i] + sp * (f_c1[i] + sp * f_c2[i])
                     f = sg * vals[r] + poly
-                    scale = abs(sg) * bnds[r] + abs(f_c0[i]) + sp * abs(f_c1[i])
-                    scale += sp * sp * abs(f_c2[i])
-                    if f <= 64.0 * EPS * scale:
+                    h1, d = _certified_step(
+                        f, sp, sg, f_c0[i], f_c1[i], f_c2[i], r, vals, bnds, t_next - tau
+                    )
+                    if h1 < 0.0:
                         hit = i
                         break
-                    d = sg * vals[r + 1] + f_c1[i] + 2.0 * sp * f_c2[i]
-                    B = abs(sg) * bnds[r + 2] + 2.0 * abs(f_c2[i])
-                    f2 = sg * vals[r + 2] + 2.0 * f_c2[i]
-                    h1 = _step(f, d, B, f2, abs(sg) * bnds[r + 3], t_next - tau)
                     if h1 < t_next - tau and not held:
                         # second lower bound: the drive's sinusoid at its worst, the homogeneous
                         # terms with their own (slower) curvature bound
@@ -2220,13 +2254,7 @@ def _march_group(
                     hit = 0
                     certify = False
             if certify and not bounds_ready:
-                for r in range(6):
-                    r_abs_a[r] = abs(rows[r, 0])
-                    r_abs_b[r] = abs(rows[r, 1])
-                    r_amp[r] = math.sqrt(rows[r, 2] * rows[r, 2] + rows[r, 3] * rows[r, 3])
-                    r_R[r] = np.inf
-                    if lam < 0.0:
-                        r_R[r] = math.sqrt(rows[r, 0] ** 2 + (rows[r, 1] / root) ** 2)
+                _bound_terms(rows, 0, 6, lam, root, r_abs_a, r_abs_b, r_amp, r_R)
                 bounds_ready = True
             if certify:
                 top = 4 if ph == STICK else 3  # highest row whose value/bound is needed, +1
@@ -2245,9 +2273,8 @@ def _march_group(
                         for r in range(top + 2):
                             if r < top + 1:
                                 vals[r] = _row(rows, r, cc, ss, sn, cs)
-                            bh = r_abs_a[r] * bc + r_abs_b[r] * bs
-                            bR = r_R[r] * bc
-                            bnds[r] = (bh if bh < bR else bR) + r_amp[r] + abs(rows[r, 4])
+                            _, bt = _bound_of_row(rows, r, bc, bs, r_abs_a, r_abs_b, r_amp, r_R)
+                            bnds[r] = bt
                     t_res = 8.0 * EPS * (abs(t0) + tau + 1e-3)
                     h = rem - s
                     for i in range(nf):
@@ -2260,16 +2287,10 @@ def _march_group(
                         r = f_row[i]
                         sg = f_sgn[i]
                         f = sg * vals[r] + f_c0[i] + s * (f_c1[i] + s * f_c2[i])
-                        scale = abs(sg) * bnds[r] + abs(f_c0[i]) + s * abs(f_c1[i])
-                        scale += s * s * abs(f_c2[i])
-                        if f <= 64.0 * EPS * scale:
-                            hit = i
-                            break
-                        d = sg * vals[r + 1] + f_c1[i] + 2.0 * s * f_c2[i]
-                        B = abs(sg) * bnds[r + 2] + 2.0 * abs(f_c2[i])
-                        f2 = sg * vals[r + 2] + 2.0 * f_c2[i]
-                        h1 = _step(f, d, B, f2, abs(sg) * bnds[r + 3], h)
-                        if h1 <= t_res:
+                        h1, _ = _certified_step(
+                            f, s, sg, f_c0[i], f_c1[i], f_c2[i], r, vals, bnds, h
+                        )
+                        if h1 < 0.0 or h1 <= t_res:
                             hit = i
                             break
                         if h1 < h:
