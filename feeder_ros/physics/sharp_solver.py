@@ -988,6 +988,22 @@ def _certified_step(f, s, sg, c0, c1, c2, r, vals, bnds, h_cap):
     return _step(f, d, B, f2, abs(sg) * bnds[r + 3], h_cap), d
 
 
+@njit(cache=True, inline="always")
+def _new_phase(kind, a, L):
+    """The phase a group takes at its own event, shared by both loops: at a stick limit it starts
+    slipping, backward at F_STICK_UP (the carrier accelerates forward past the limit) and forward
+    at F_STICK_DOWN; where its relative velocity vanishes (F_RELVEL) it sticks when the carrier's
+    acceleration ``a`` (with the group on it) is within its limit ``L``, else it reverses,
+    slipping against ``a``. ``a`` and ``L`` matter only for F_RELVEL."""
+    if kind == F_STICK_UP:
+        return SLIP_BACKWARD
+    if kind == F_STICK_DOWN:
+        return SLIP_FORWARD
+    if abs(a) <= L:
+        return STICK
+    return SLIP_BACKWARD if a > 0.0 else SLIP_FORWARD
+
+
 STUCK_REPEATS = 1000  # events in a row at one instant (no exit among them): the run is stuck
 
 
@@ -1545,7 +1561,7 @@ def advance(
             if log_events:
                 _log(ev_t, ev_kind, ev_part, counters, te, EV_SLIDE_END, -1)
         elif kind in (F_STICK_UP, F_STICK_DOWN):
-            new_phase = SLIP_BACKWARD if kind == F_STICK_UP else SLIP_FORWARD
+            new_phase = _new_phase(kind, 0.0, 0.0)
             limit = max(abs(ae), lmin) * (1.0 + 1e-12)
             for g in range(n_groups):
                 if g_head[g] >= 0 and g_phase[g] == STICK and g_L[g] <= limit:
@@ -1565,8 +1581,8 @@ def advance(
                     g_mass[g] * g_D[g] if g_phase[g] == SLIP_BACKWARD else -g_mass[g] * g_D[g]
                 )
                 a_test = (Fe + Fs - c * ve - k * xe) / (m + g_mass[g])
-            if abs(a_test) <= g_L[g]:
-                g_phase[g] = STICK
+            g_phase[g] = _new_phase(kind, a_test, g_L[g])
+            if g_phase[g] == STICK:
                 if log_events:
                     _log_group(ev_t, ev_kind, ev_part, counters, te, EV_STICK, g, g_head, m_next)
                 # merge with a sticking group of the same friction: identical futures
@@ -1593,10 +1609,8 @@ def advance(
                         g_mass[h2] += g_mass[g]
                         g_lead[h2] = max(g_lead[h2], g_lead[g] + shift)
                         break
-            else:
-                g_phase[g] = SLIP_BACKWARD if a_test > 0.0 else SLIP_FORWARD
-                if log_events:
-                    _log_group(ev_t, ev_kind, ev_part, counters, te, EV_REVERSAL, g, g_head, m_next)
+            elif log_events:
+                _log_group(ev_t, ev_kind, ev_part, counters, te, EV_REVERSAL, g, g_head, m_next)
         elif kind == F_EXIT:
             lead_i = _exit_lead(
                 f_group[hit], te, xe, g_y, g_slip, g_mass, g_lead, g_head, m_group, m_next, m_o,
@@ -2345,7 +2359,7 @@ def _march_group(
             kind = f_kind[hit]
             n = ev_n[g]
             if kind in (F_STICK_UP, F_STICK_DOWN):
-                g_phase[g] = SLIP_BACKWARD if kind == F_STICK_UP else SLIP_FORWARD
+                g_phase[g] = _new_phase(kind, ae, L)
                 g_u[g] = ve
                 ev_t[g, n] = te
                 ev_kind[g, n] = EV_SLIP_START
@@ -2353,12 +2367,8 @@ def _march_group(
                 ev_n[g] = n + 1
             elif kind == F_RELVEL:
                 g_u[g] = ve
-                if abs(ae) <= L:
-                    g_phase[g] = STICK
-                    ev_kind[g, n] = EV_STICK
-                else:
-                    g_phase[g] = SLIP_BACKWARD if ae > 0.0 else SLIP_FORWARD
-                    ev_kind[g, n] = EV_REVERSAL
+                g_phase[g] = _new_phase(kind, ae, L)
+                ev_kind[g, n] = EV_STICK if g_phase[g] == STICK else EV_REVERSAL
                 ev_t[g, n] = te
                 ev_part[g, n] = -1
                 ev_n[g] = n + 1
