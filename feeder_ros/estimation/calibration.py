@@ -303,12 +303,16 @@ class Calibrator:
             point.speeds = values
 
     def _estimate(self, weights: F64) -> F64:
-        """The posterior mean: the estimate of least expected squared error, and a parameter the
-        data leave free stays at its mean. A single particle (the once-used fallback to the
-        "best" one) is fragile where the speed has cliffs inside the posterior: after a
-        resampling the weights rank only the measurements since, and the chosen particle wandered
-        along the ridge (issue 28's 9.7 % pair, 33 Hz / 20 N: 3.5 % with the mean)."""
-        return np.asarray(weights @ self._theta, np.float64)
+        """The posterior mean if it fits the measurements about as well as the best particle (a
+        parameter the data leave free then stays at its mean, not at a random particle's value),
+        else the best particle."""
+        points = list(self._points.values())
+        mean = weights @ self._theta
+        best = self._theta[int(np.argmax(weights))]
+        candidates = np.vstack((mean, best))
+        speeds = [p.run.speeds(self._prior, candidates) for p in points]
+        log = self._log_posterior(candidates, speeds)
+        return np.asarray(mean if log[0] >= log[1] - 2.0 else best, np.float64)
 
     def _log_posterior(self, theta: F64, speeds: list[F64]) -> F64:
         log = _log_normal(theta, self._prior.mean, self._prior_info)

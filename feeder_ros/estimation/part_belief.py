@@ -88,7 +88,9 @@ class PartBelief:
     mean: F64
     covariance: F64
     particles: F64 = field(default_factory=lambda: np.zeros((0, 3)))
-    #: the theta the estimator runs: the posterior mean (before any measurement: the prior's mean)
+    #: the theta the estimator runs: the posterior mean where its speeds agree with the
+    #: measurements as well as the best particle's (within 2 in log-likelihood), else the best
+    #: particle (the mean of a curved or split posterior need not fit the data); the prior's mean
     estimate: F64 = field(default_factory=lambda: np.full(3, np.nan))
     transits: int = 0
     operator_speeds: int = 0
