@@ -39,9 +39,11 @@ SIMULATOR = [
     "-r", "__node:=platform_simulator_realistic",
     "--params-file", str(CONFIG / "platform_simulator.yaml"),
     # light sensor streams, a bowl feeding a part every 0.3 s, two sensors 1 cm apart near the
-    # start of a short track (parts leave at 5 cm, so few are on it)
+    # start of a short track (parts leave at 5 cm, so few are on it); parts 2 mm long, so that
+    # the bowl's exit (blocked while the last part is within a part length) keeps up at the slow
+    # points too
     "-p", "imu_rate_hz:=100.0", "-p", "state_rate_hz:=50.0", "-p", "parts_rate_hz:=10.0",
-    "-p", "initial_parts:=0", "-p", "feed_interval_s:=0.3",
+    "-p", "initial_parts:=0", "-p", "feed_interval_s:=0.3", "-p", "part_length_m:=0.002",
     "-p", "sensor_positions_m:=0.02, 0.03", "-p", "track_length_m:=0.05",
 ]  # fmt: skip
 DRIVE = [
