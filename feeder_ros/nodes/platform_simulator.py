@@ -478,7 +478,7 @@ class PlatformSimulator(Node):
         with self._lock:
             ids = [
                 self._sim.spawn_part(
-                    PartSpec(position_m=request.position_m + i * request.spacing_m)
+                    PartSpec(position_m=request.position_m + i * request.spacing_m), at_rest=True
                 )
                 for i in range(request.count)
             ]
@@ -634,7 +634,7 @@ class PlatformSimulator(Node):
         if start_blocked(self._sim.track_positions(), start, self._sensors.part_length_m):
             self._feeds_blocked += 1
         else:
-            self._sim.spawn_part(PartSpec(position_m=start))
+            self._sim.spawn_part(PartSpec(position_m=start), at_rest=True)
 
     def _grid(self, index: int, rate: float, t_end: float) -> tuple[np.ndarray, int]:
         last = math.floor(t_end * rate + 1e-9)

@@ -92,9 +92,9 @@ NODE_PARAMETERS: dict[str, ParameterSpec] = {
             "feed_interval_s",
             float,
             "s",
-            "put a new part at part_start_m this often (a bowl feeding the track), skipped while "
-            "a part on the track lies within part_length_m of it (the bowl's exit is blocked); "
-            "0: off",
+            "put a new part at part_start_m this often (a bowl feeding the track; let go at "
+            "rest, as ~/spawn_parts does), skipped while a part on the track lies within "
+            "part_length_m of it (the bowl's exit is blocked); 0: off",
             minimum=0.0,
         ),
         ParameterSpec(

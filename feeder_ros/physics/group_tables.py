@@ -71,6 +71,14 @@ class _Groups:
         )
         return int(hits[0]) if hits.size else -1
 
+    def slipping_group(self, L: float, D: float, phase: int, u: float) -> int:
+        """Index of an active group with this friction slipping at ``u`` in ``phase`` now, or -1
+        (parts in the same state now share their future: one group)."""
+        hits = np.flatnonzero(
+            (self.head >= 0) & (self.phase == phase) & (self.u == u) & (self.L == L) & (self.D == D)
+        )
+        return int(hits[0]) if hits.size else -1
+
     def has_duplicate_sticking(self) -> bool:
         """Whether two active sticking groups have the same friction (they could be merged)."""
         live = (self.head >= 0) & (self.phase == _k.STICK)

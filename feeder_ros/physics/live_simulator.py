@@ -190,16 +190,30 @@ class FeederSimulator:
         )
 
     # -- parts ---------------------------------------------------------------------------
-    def spawn_part(self, spec: PartSpec) -> int:
-        """Put a part on the track now (sticking, at ``spec.position_m``); returns its index."""
+    def spawn_part(self, spec: PartSpec, at_rest: bool = False) -> int:
+        """Put a part on the track now at ``spec.position_m``; returns its index.
+
+        By default it moves with the carrier (sticking). ``at_rest``: it is let go at rest in
+        the lab, as a bowl's exit or a hand puts a part down, and slips until friction takes it
+        along. The difference matters on a vibrating track: a part given the carrier's velocity
+        at its backward peak (about 0.09 m/s at 30 Hz) slides back some 5 mm before friction
+        stops it; one let go at rest stays within the carrier's stroke."""
         mass, mu_s, mu_d = spec.resolved(self._params)
         kappa_g = self._params.gravity_mps2 * self._params.friction_multiplier
         L, D = mu_s * kappa_g, mu_d * kappa_g
         index = len(self._specs)
         self._specs.append(spec)
-        g = self._g.sticking_group(L, D)
-        if g < 0:
-            g = self._g.add(L, D, float(self._state[_k.S_V]))
+        carrier_v = float(self._state[_k.S_V])
+        if at_rest and carrier_v != 0.0:
+            phase = _k.SLIP_FORWARD if carrier_v < 0.0 else _k.SLIP_BACKWARD
+            g = self._g.slipping_group(L, D, phase, 0.0)
+            if g < 0:
+                g = self._g.add(L, D, 0.0)
+                self._g.phase[g] = phase
+        else:
+            g = self._g.sticking_group(L, D)
+            if g < 0:
+                g = self._g.add(L, D, carrier_v)
         self._m.add(
             group=g,
             offset=spec.position_m - self._g.y[g],

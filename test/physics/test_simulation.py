@@ -450,3 +450,40 @@ def test_many_identical_parts_leave_at_one_instant(parallel_min_groups: int) -> 
     exits = run.event_t_s[run.event_kind == EventKind.PART_EXIT]
     assert exits.size > 0, "no part reached the track end"
     assert np.count_nonzero(exits == exits[0]) >= 1500
+
+
+@pytest.mark.parametrize("coupling", ["one_way", "two_way"])
+def test_a_part_let_go_at_rest_slips_from_rest_instead_of_sliding_back(coupling: str) -> None:
+    """``spawn_part(at_rest=True)``, as the simulator's bowl puts parts down: put down while the
+    carrier moves back at its peak speed (about 0.09 m/s at 30 Hz), the part starts at rest in
+    the lab and friction pulls it along at mu_d*g; it stays within the carrier's stroke of where
+    it was put down. A part given the carrier's velocity (the default) slides back about 5 mm,
+    and a later feed 1.5 s on could still find the bowl's exit blocked. Parts let go together
+    share one group."""
+    params = FeederParameters(
+        damping_ns_per_m=200.0,
+        drive_frequency_hz=30.0,
+        drive_amplitude_n=60.0,
+        coupling=coupling,  # type: ignore[arg-type]
+    )
+    probe = FeederSimulator(params, ())
+    settled = probe.advance(3.0, np.linspace(2.9, 3.0, 1001))
+    t_peak = float(settled.t_s[np.argmin(settled.carrier_v_mps)])
+    sim = FeederSimulator(params, ())
+    sim.advance(t_peak)
+    _, carrier_v, _ = sim.carrier_state
+    assert carrier_v < -0.08
+    carried = sim.spawn_part(PartSpec(0.0))
+    rested = [sim.spawn_part(PartSpec(0.0), at_rest=True) for _ in range(3)]
+    assert sim._g.size == 2  # one sticking group, one group let go at rest
+    run = sim.advance(t_peak + 1.0, t_peak + np.arange(0.0, 1.0, 1e-4))
+    track = run.part_x_m - run.carrier_x_m[:, None]
+    first = rested[0]
+    assert run.part_v_mps[0, first] == 0.0
+    assert run.part_phase[0, first] == Phase.SLIP_FORWARD
+    mu_d_g = params.kinetic_friction * params.gravity_mps2
+    assert run.part_v_mps[1:50, first] == pytest.approx(-mu_d_g * (run.t_s[1:50] - t_peak))
+    assert track[:, first].min() > -0.001  # within the carrier's stroke (about 0.6 mm)
+    assert track[:, carried].min() < -0.004  # carried back by the carrier's momentum
+    assert track[-1, first] > 0.005  # and 5 mm on within a second
+    assert np.array_equal(track[:, rested[1]], track[:, first], equal_nan=True)
