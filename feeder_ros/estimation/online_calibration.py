@@ -8,7 +8,11 @@ vehicle estimator node's calibration).
   part that began its passage under the previous setting or its ramp was carried at another speed.
   Its uncertainty: ``transit_uncertainty`` relative (part-to-part variation, sensor jitter) and
   the timing's quantisation, about one response period in the transit's duration (a part moves in
-  steps once per period), uniform: ``period/(T*sqrt(3))`` relative.
+  steps once per period), uniform: ``period/(T*sqrt(3))`` relative. The sensor edges can arrive
+  ahead of the accelerometer samples of the same moment (another topic; on a loaded machine the
+  estimator drains its samples late): a transit ending after the samples the estimator has seen
+  waits (:meth:`MeasurementSource.due`, called as the samples come in) and is refused, with the
+  lag, only when the stream falls more than :data:`MAX_STREAM_LAG_S` behind the sensors.
 * **An operator's measured speed**, with its uncertainty (default 2 %), at the current setting.
 
 Each gives a :class:`~feeder_ros.estimation.calibration.SpeedMeasurement` on the estimator's
@@ -31,6 +35,12 @@ __all__ = ["MeasurementSource"]
 
 #: a sensor event's position may differ from the configured one by this much (rounding)
 POSITION_TOLERANCE_M = 1e-3
+#: a transit may end this long after the accelerometer samples the estimator has seen
+STREAM_SLACK_S = 0.5
+#: a transit waits for the accelerometer stream at most this long (sensor time) behind the sensors
+MAX_STREAM_LAG_S = 10.0
+#: transits waiting for the stream at most (the oldest is refused beyond)
+MAX_WAITING_TRANSITS = 64
 DEFAULT_OPERATOR_UNCERTAINTY = 0.02
 
 
@@ -55,6 +65,8 @@ class MeasurementSource:
         self.positions = positions
         self.transit_uncertainty = float(transit_uncertainty)
         self.timer: TransitTimer | None = None
+        self._waiting: list[Transit] = []  # complete transits the stream has not reached yet
+        self._latest_edge_s = -math.inf
         first, second = transit_sensors
         if positions:
             for index in (first, second):
@@ -94,11 +106,46 @@ class MeasurementSource:
                 f"sensor {sensor} reports position {position_m!r} m, configured {expected:g} m: "
                 "the sensor list does not match this feeder; ignored"
             )
+        self._latest_edge_s = stamp_s
         transit = self.timer.on_edge(stamp_s, sensor, part, present)
         if transit is None:
             refusal, self.timer.last_refusal = self.timer.last_refusal, ""
             return refusal or None
+        if transit.end_s > estimator.last_estimate.t_s + STREAM_SLACK_S:
+            self._waiting.append(transit)  # measured by due() once the samples are in
+            if len(self._waiting) > MAX_WAITING_TRANSITS:
+                return self._stream_lags(estimator, self._waiting.pop(0))
+            return None
         return self._transit_measurement(estimator, transit)
+
+    @property
+    def waiting(self) -> int:
+        """Transits complete at the sensors, waiting for the accelerometer stream."""
+        return len(self._waiting)
+
+    def due(self, estimator: VehicleEstimator) -> list[SpeedMeasurement | str]:
+        """The waiting transits the estimator's samples now reach (measured, or refused by the
+        steady-segment rule), and those the stream lags more than :data:`MAX_STREAM_LAG_S`
+        behind the sensors (refused with the lag); in the transits' order."""
+        reached = estimator.last_estimate.t_s
+        outcomes: list[SpeedMeasurement | str] = []
+        keep = []
+        for transit in self._waiting:
+            if transit.end_s <= reached + STREAM_SLACK_S:
+                outcomes.append(self._transit_measurement(estimator, transit))
+            elif self._latest_edge_s - transit.end_s > MAX_STREAM_LAG_S:
+                outcomes.append(self._stream_lags(estimator, transit))
+            else:
+                keep.append(transit)
+        self._waiting = keep
+        return outcomes
+
+    def _stream_lags(self, estimator: VehicleEstimator, transit: Transit) -> str:
+        return (
+            f"transit ending at {transit.end_s:.3f} s not used: the accelerometer stream has "
+            f"reached only {estimator.last_estimate.t_s:.3f} s, more than "
+            f"{MAX_STREAM_LAG_S:g} s behind the sensors ({self._latest_edge_s:.3f} s)"
+        )
 
     def _transit_measurement(
         self, estimator: VehicleEstimator, transit: Transit
@@ -111,7 +158,7 @@ class MeasurementSource:
                 f"transit {transit.start_s:.3f}-{transit.end_s:.3f} s not used: the carrier was "
                 f"not steady at one drive setting for all of it (steady {when})"
             )
-        if transit.end_s > estimator.last_estimate.t_s + 0.5:
+        if transit.end_s > estimator.last_estimate.t_s + STREAM_SLACK_S:
             return (
                 f"transit ending at {transit.end_s:.3f} s not used: the accelerometer stream has "
                 f"reached only {estimator.last_estimate.t_s:.3f} s"

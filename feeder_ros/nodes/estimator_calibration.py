@@ -261,6 +261,18 @@ class EstimatorCalibration:
                 estimator, stamp, message.sensor_index, message.sensor_position_m, part,
                 message.present,
             )  # fmt: skip
+        self._handle(outcome)
+
+    def stream_advanced(self) -> None:
+        """The estimator has taken in more samples: the transits that waited for them."""
+        if not self._enabled:
+            return
+        with self._lock:
+            outcomes = self._source.due(self._estimator())
+        for outcome in outcomes:
+            self._handle(outcome)
+
+    def _handle(self, outcome: SpeedMeasurement | str | None) -> None:
         if isinstance(outcome, SpeedMeasurement):
             # folded in by the worker, off the executor's thread
             self._queue.put((self._generation, outcome))
@@ -413,6 +425,7 @@ class EstimatorCalibration:
             "operator_speeds_used": str(belief.operator_speeds),
             "operating_points": str(len(belief.points)),
             "measurements_refused": str(self._refused),
+            "transits_waiting_for_samples": str(self._source.waiting),
             "file": self._file or "(none)",
         }
         return diagnostic_status(name, level, text, "part model", values)

@@ -452,6 +452,7 @@ class VehicleEstimatorNode(Node):
                 return
             record = self._record
         self._publisher.publish(self._to_message(record))
+        self._calibration.stream_advanced()
 
     def _to_message(self, record: EstimateRecord) -> VehicleEstimate:
         message = VehicleEstimate()

@@ -3,6 +3,7 @@ steady-segment rule, refusals with their reasons, and the calibration file."""
 
 from __future__ import annotations
 
+import dataclasses
 import math
 from pathlib import Path
 
@@ -172,3 +173,44 @@ def test_the_calibration_file_round_trips_and_refuses_what_it_cannot_use(tmp_pat
         bad.write_text(text)
         with pytest.raises(CalibrationFileError, match=needle):
             read_calibration(bad, nominal)
+
+
+def test_a_transit_ahead_of_the_accelerometer_stream_waits_for_it(
+    steady_estimator: VehicleEstimator,
+) -> None:
+    """Sensor edges may arrive before the samples of the same moment (a loaded estimator drains
+    late): the transit waits, is measured once the stream reaches its end, and is refused with the
+    lag only when the stream falls more than MAX_STREAM_LAG_S behind the sensors."""
+    reached = steady_estimator.last_estimate.t_s
+    steady = steady_estimator.steady_since_s
+    source = MeasurementSource(SENSORS)
+    source.on_sensor_edge(steady_estimator, steady + 0.1, 0, 0.05, 1, True)
+    assert source.on_sensor_edge(steady_estimator, reached + 2.0, 1, 0.135, 1, True) is None
+    assert source.waiting == 1
+    assert source.due(steady_estimator) == []  # the stream is still 2 s short of its end
+    assert source.waiting == 1
+
+    class Caught:  # the same estimator, its samples now past the transit's end
+        def __init__(self, inner: VehicleEstimator, t_s: float) -> None:
+            self._inner = inner
+            self.last_estimate = dataclasses.replace(inner.last_estimate, t_s=t_s)
+
+        def __getattr__(self, name: str) -> object:
+            return getattr(self._inner, name)
+
+    [measured] = source.due(Caught(steady_estimator, reached + 2.0))  # type: ignore[arg-type]
+    assert isinstance(measured, SpeedMeasurement)
+    assert measured.speed_mps == pytest.approx(0.085 / (reached + 1.9 - steady))
+    assert source.waiting == 0
+
+    # the stream stops: once the sensors are 10 s past the transit, it is refused with the lag
+    source.on_sensor_edge(steady_estimator, reached + 1.0, 0, 0.05, 2, True)
+    assert source.on_sensor_edge(steady_estimator, reached + 5.0, 1, 0.135, 2, True) is None
+    source.on_sensor_edge(steady_estimator, reached + 14.0, 0, 0.05, 3, True)
+    assert source.due(steady_estimator) == []
+    source.on_sensor_edge(steady_estimator, reached + 15.5, 0, 0.05, 4, True)
+    [refused] = source.due(steady_estimator)
+    assert isinstance(refused, str)
+    assert f"transit ending at {reached + 5.0:.3f} s not used" in refused
+    assert f"has reached only {reached:.3f} s, more than 10 s behind the sensors" in refused
+    assert source.waiting == 0
