@@ -386,7 +386,7 @@ def main(argv: list[str] | None = None) -> int:
         "--hold", type=float, default=6.0, help="seconds at each target speed once confirmed"
     )
     parser.add_argument(
-        "--timeout", type=float, default=45.0, help="at most this long to confirm each target"
+        "--timeout", type=float, default=75.0, help="at most this long to confirm each target"
     )
     parser.add_argument(
         "--composed", action="store_true", help="run the cell's nodes in one process"
