@@ -21,23 +21,21 @@ import argparse
 import math
 import sys
 from pathlib import Path
+from typing import TYPE_CHECKING
 
 from feeder_ros.cli.arguments import int_at_least, non_negative_int, positive_int
 from feeder_ros.cli.main import CommandError
 from feeder_ros.cli.outputs import check_output_dir, finish_output_dir, output_path
 from feeder_ros.cli.progress import ProgressBar
 from feeder_ros.cli.sim import add_plant_arguments, default_config_path, plant_from_arguments
-from feeder_ros.design.optimizer import (
-    OBJECTIVES,
-    DesignProblem,
-    evaluate_designs,
-    optimize,
-    population_size,
-)
-from feeder_ros.design.report import sensitivity_text, summary, write_report
-from feeder_ros.design.sensitivity import sensitivity_table
-from feeder_ros.design.space import DesignConfig, load_design_config
-from feeder_ros.physics.parameters import FeederParameters
+from feeder_ros.design.objectives import OBJECTIVES
+
+# the optimizer, its report (scipy, matplotlib) and the physics core are imported where they are
+# used, so that ``feeder --help`` does not load them
+if TYPE_CHECKING:
+    from feeder_ros.design.optimizer import DesignProblem
+    from feeder_ros.design.space import DesignConfig
+    from feeder_ros.physics.parameters import FeederParameters
 
 __all__ = ["DESIGN_NAME", "EPILOG", "HELP", "add_arguments", "run"]
 
@@ -115,6 +113,8 @@ def add_arguments(parser: argparse.ArgumentParser) -> None:
 
 
 def _load(args: argparse.Namespace) -> tuple[DesignConfig, FeederParameters, str]:
+    from feeder_ros.design.space import load_design_config
+
     config_dir = default_config_path().parent
     space_path = Path(args.space) if args.space is not None else config_dir / DESIGN_NAME
     if not space_path.is_file():
@@ -134,6 +134,15 @@ def _load(args: argparse.Namespace) -> tuple[DesignConfig, FeederParameters, str
 
 
 def run(args: argparse.Namespace) -> int:
+    from feeder_ros.design.optimizer import (
+        DesignProblem,
+        evaluate_designs,
+        optimize,
+        population_size,
+    )
+    from feeder_ros.design.report import sensitivity_text, summary, write_report
+    from feeder_ros.design.sensitivity import sensitivity_table
+
     if args.objective == "min-force" and args.target_speed is None:
         raise CommandError("--objective min-force needs --target-speed (m/s)")
     if args.objective == "max-speed" and args.target_speed is not None:

@@ -39,25 +39,14 @@ from feeder_ros.cli.outputs import (
 )
 from feeder_ros.cli.progress import ProgressBar
 from feeder_ros.cli.sim import add_plant_arguments, default_config_path, plant_from_arguments
-from feeder_ros.identification.group_fit import DEFAULT_FOLDS, FitSettings, GroupFit, fit_group
-from feeder_ros.identification.report import (
-    fit_json,
-    summary,
-    write_model_file,
-    write_outputs,
-    write_points,
-)
-from feeder_ros.identification.sweep import (
-    SweepPlan,
-    SweepPlanError,
-    SweepResult,
-    parse_orders,
-    parse_values,
-)
 from feeder_ros.yaml_files import YamlFileError, read_yaml
 
+# the sweep, fit and report modules (scipy, matplotlib) are imported where they are used, so
+# that ``feeder --help`` does not load them
 if TYPE_CHECKING:
     from feeder_ros.bag.analysis import BagAnalysis
+    from feeder_ros.identification.group_fit import FitSettings, GroupFit
+    from feeder_ros.identification.sweep import SweepPlan, SweepResult
 
 __all__ = ["EPILOG", "HELP", "PLAN_NAME", "add_arguments", "default_plan_path", "run"]
 
@@ -193,6 +182,14 @@ def add_arguments(parser: argparse.ArgumentParser) -> None:
 
 def load_plan(args: argparse.Namespace) -> tuple[SweepPlan, FitSettings]:
     """The plan file (``--plan`` or the default) with the command-line overrides."""
+    from feeder_ros.identification.group_fit import DEFAULT_FOLDS, FitSettings
+    from feeder_ros.identification.sweep import (
+        SweepPlan,
+        SweepPlanError,
+        parse_orders,
+        parse_values,
+    )
+
     path = Path(args.plan) if args.plan is not None else default_plan_path()
     if not path.is_file():
         raise CommandError(f"--plan {path}: no such file")
@@ -295,6 +292,8 @@ def _sweep_sim(
 
 
 def _sweep_live(args: argparse.Namespace, plan: SweepPlan, show: bool) -> SweepResult:
+    from feeder_ros.identification.report import write_points
+
     try:
         from feeder_ros.nodes.sweep_client import LiveSweepError, run_live_sweep
     except ImportError as error:  # rclpy or the generated interfaces missing
@@ -345,6 +344,7 @@ def _sweep_bag(args: argparse.Namespace, plan: SweepPlan, show: bool) -> tuple[S
     """The sweep measured in the bags, and how many of them lost recorded data."""
     from feeder_ros.bag.errors import BagError
     from feeder_ros.identification.bag_sweep import sweep_from_bags
+    from feeder_ros.identification.sweep import parse_values
 
     if not args.inputs:
         raise CommandError("--source bag: give the bag(s) of the sweep")
@@ -412,10 +412,15 @@ def _report_bag_problems(analysis: BagAnalysis) -> None:
 def _sweep_csv(args: argparse.Namespace) -> SweepResult:
     if len(args.inputs) != 1:
         raise CommandError("--source csv: give exactly one sweep CSV")
+    from feeder_ros.identification.sweep import SweepResult
+
     return SweepResult.read_csv(args.inputs[0])
 
 
 def run(args: argparse.Namespace) -> int:
+    from feeder_ros.identification.group_fit import fit_group
+    from feeder_ros.identification.report import fit_json, summary, write_model_file, write_outputs
+
     if args.source == "bag":
         check_apart_from_inputs(args.output, "--output", args.inputs)
     check_output_dir(args.output, "--output", holds="sweep and fit files (CSV, JSON, PNG)")

@@ -36,6 +36,7 @@ import numpy as np
 import numpy.typing as npt
 from scipy.optimize import Bounds, NonlinearConstraint, OptimizeResult, differential_evolution
 
+from feeder_ros.design.objectives import OBJECTIVES
 from feeder_ros.design.space import DesignError, DesignSpace
 from feeder_ros.design.stick_slip_conditions import (
     CONDITION_NAMES,
@@ -62,7 +63,6 @@ __all__ = [
 
 F64 = npt.NDArray[np.float64]
 Objective = Literal["max-speed", "min-force"]
-OBJECTIVES: Final[tuple[str, ...]] = ("max-speed", "min-force")
 #: track length during an evaluation: long enough that no part leaves it
 EVALUATION_TRACK_M: Final = 1.0e6
 #: called after each evaluated batch with (designs evaluated so far, designs planned)
