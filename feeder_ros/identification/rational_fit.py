@@ -23,6 +23,9 @@ each refined by :func:`scipy.optimize.least_squares` on Eq. 23 in a parametrisat
 express stable poles and minimum-phase zeros (see :func:`fit_rational`); the best refinement wins.
 Frequencies are scaled by a reference frequency (the geometric centre of the band) and speeds by
 their RMS, so that the numbers the optimiser sees are of order one.
+
+(About 900 lines: the model, the fit and the comparison of model orders share this module's
+private data checks and parameter layout; a module of their own would import them all.)
 """
 
 from __future__ import annotations

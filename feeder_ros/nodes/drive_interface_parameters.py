@@ -1,6 +1,8 @@
 """The drive interface's parameters (ROS free): declarations with units and ranges, defaults, the
 conversions of a parameter dict into the cores' settings (limits, Modbus, plant, tracker, level
 control, amplitude regulation), and the node's declared interface (topics, services, the action).
+(About 840 lines, most of them the declaration table, one entry per parameter with its unit,
+range and description: split, the table would only move, and the docs read it as one.)
 
 :mod:`feeder_ros.nodes.drive_interface` declares them on the node; tests, docs and the cell
 description read them from here without starting ROS.

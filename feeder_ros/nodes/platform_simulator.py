@@ -53,6 +53,7 @@ from feeder_ros.nodes.platform_simulator_parameters import (
 )
 from feeder_ros.nodes.ros_parameters import declare_parameters, validator
 from feeder_ros.nodes.runner import run_node
+from feeder_ros.physics.command_policy import Command, decide
 from feeder_ros.physics.drive import DriveError
 from feeder_ros.physics.errors import SimulationError
 from feeder_ros.physics.parameters import PARAMETER_SPECS, FeederParameters, ParameterError
@@ -66,12 +67,6 @@ if TYPE_CHECKING:
     from feeder_ros.ros_compat import AnyParameter
 
 PHYSICS_DEFAULTS = FeederParameters().as_dict()
-#: drive commands beyond these are refused as malformed (no exciter comes near them, and the
-#: solver's numbers overflow long before the float range ends)
-MAX_COMMAND_FREQUENCY_HZ = 1e5
-MAX_COMMAND_AMPLITUDE_N = 1e6
-#: a drive command stamped further ahead of the simulation clock is refused (clocks that differ)
-FUTURE_STAMP_TOLERANCE_S = 1.0
 #: the model's drive parameters mean something else to the node: its drive comes from
 #: drive/command (the drive interface), never from a parameter. They stay declared, read-only,
 #: so the simulator's YAML (shared with ``feeder sim``, whose drive they are) loads without a
@@ -361,73 +356,40 @@ class PlatformSimulator(Node):
 
     # -- inputs --------------------------------------------------------------------------------
     def _on_command(self, message: DriveCommand) -> None:
-        # the ramp applies to a stop too; frequency and amplitude only to a command that drives
-        ramp_ok = math.isfinite(message.ramp_time_s) and message.ramp_time_s >= 0.0
-        if not ramp_ok or (
-            message.enabled
-            and not (
-                math.isfinite(message.frequency_hz)
-                and 0.0 < message.frequency_hz <= MAX_COMMAND_FREQUENCY_HZ
-                and 0.0 <= message.amplitude_n <= MAX_COMMAND_AMPLITUDE_N
-            )
-        ):
-            self.get_logger().warning(
-                f"ignoring malformed drive command: enabled={message.enabled}, frequency_hz="
-                f"{message.frequency_hz!r} (0 < f <= {MAX_COMMAND_FREQUENCY_HZ:g}), amplitude_n="
-                f"{message.amplitude_n!r} (0 <= A <= {MAX_COMMAND_AMPLITUDE_N:g}), ramp_time_s="
-                f"{message.ramp_time_s!r} (finite, >= 0)",
-                throttle_duration_sec=5.0,
-            )
-            return
+        stamp = message.header.stamp
         with self._lock:
             now = self._sim.time_s
-            at = self._sim_time_of(message.header.stamp)
-            timeout = self._values["command_timeout_s"]
-            if message.header.stamp.sec == 0 and message.header.stamp.nanosec == 0:
-                at = now  # unstamped: at once
-            if timeout > 0.0 and at < now - timeout:
-                self.get_logger().warning(
-                    f"drive command stamped {now - at:.3f} s ago (> command_timeout_s="
-                    f"{timeout}): treated as stop",
-                    throttle_duration_sec=5.0,
-                )
+            command = Command(
+                message.enabled,
+                message.frequency_hz,
+                message.amplitude_n,
+                message.ramp_time_s,
+                None if stamp.sec == 0 and stamp.nanosec == 0 else self._sim_time_of(stamp),
+                f"{stamp.sec}.{stamp.nanosec:09d}",
+            )
+            decision = decide(
+                command, now, self._lag_s(), self._values["command_timeout_s"], self._drive
+            )
+            if decision.warning:
+                self.get_logger().warning(decision.warning, throttle_duration_sec=5.0)
+            if decision.action == "stop":
                 self._stop_drive(now)
+            if decision.action not in ("schedule", "refresh"):
                 return
-            lag = self._lag_s()
-            if now < at <= now + lag + FUTURE_STAMP_TOLERANCE_S:
-                # ahead of the simulation only because the simulation lags the wall clock (the
-                # commander's): the command is for the present, applied at the simulation's own
-                at = now
-                self._late_commands += 1
-            elif at - now > FUTURE_STAMP_TOLERANCE_S:
-                # a stamp from a clock that does not match the simulation's (wall clock against
-                # /clock, or a wrong epoch): scheduled there it would also hold off the timeout
-                self.get_logger().warning(
-                    f"ignoring drive command stamped {at - now:.3f} s ahead of the simulation "
-                    f"clock (stamp {message.header.stamp.sec}.{message.header.stamp.nanosec:09d}"
-                    f", more than {FUTURE_STAMP_TOLERANCE_S:g} s ahead): do the commander and the"
-                    " simulator use the same clock (use_sim_time)?",
-                    throttle_duration_sec=5.0,
-                )
-                return
-            at = max(at, now)
-            frequency = message.frequency_hz if message.enabled else self._drive[0]
-            amplitude = message.amplitude_n if message.enabled else 0.0
-            if (frequency, amplitude) != self._drive or at > now:
-                # a repeated command only refreshes the deadline: the schedule stays short
+            self._late_commands += decision.late
+            if decision.action == "schedule":
+                drive = (decision.frequency_hz, decision.amplitude_n)
                 try:
-                    self._sim.set_drive(
-                        frequency, amplitude, at_time_s=at, ramp_s=message.ramp_time_s
-                    )
+                    self._sim.set_drive(*drive, at_time_s=decision.at_s, ramp_s=decision.ramp_s)
                 except (DriveError, ParameterError) as error:  # e.g. a ramp over MAX_TIME_S
                     self.get_logger().warning(
                         f"ignoring drive command: {error}", throttle_duration_sec=5.0
                     )
                     return
-                self._drive = (frequency, amplitude)
-                if amplitude > 0.0:
+                self._drive = drive
+                if decision.amplitude_n > 0.0:
                     self._failure = None  # driven again: the next failure reports itself
-            self._command_deadline_s = at + timeout if timeout > 0.0 else math.inf
+            self._command_deadline_s = decision.deadline_s
 
     def _recover(self, error: SimulationError) -> None:
         """The solver cannot continue (for example an undamped branch driven exactly at its
