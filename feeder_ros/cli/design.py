@@ -163,7 +163,7 @@ def run(args: argparse.Namespace) -> int:
 
     _, members = population_size(design.space, args.population)
     show = bool(args.progress) or sys.stderr.isatty()
-    bar = ProgressBar("design search", members * (args.generations + 1), show)
+    bar = ProgressBar("design search", members * (args.generations + 1), show, unit="designs")
 
     def progress(done: int, planned: int) -> None:
         bar.total = float(planned)

@@ -282,7 +282,7 @@ def _sweep_sim(
     from feeder_ros.identification.offline_sweep import offline_sweep
 
     params, config, preset = plant_from_arguments(args)
-    bar = ProgressBar("sweeping (sim)", plan.point_count, show)
+    bar = ProgressBar("sweeping (sim)", plan.point_count, show, unit="points")
     try:
         result = offline_sweep(params, plan, progress=lambda done, total: bar.update(done))
     finally:
@@ -300,7 +300,7 @@ def _sweep_live(args: argparse.Namespace, plan: SweepPlan, show: bool) -> SweepR
         raise CommandError(
             f"--source live needs ROS 2 (rclpy) and the built interfaces: {error}"
         ) from None
-    bar = ProgressBar("sweeping (live)", plan.point_count, show)
+    bar = ProgressBar("sweeping (live)", plan.point_count, show, unit="points")
 
     def save(result: SweepResult) -> None:
         # before the client's teardown, which can hang in the middleware (then the process ends

@@ -348,7 +348,7 @@ def run(args: argparse.Namespace) -> int:
     parts = default_parts(params, args.parts)
     _check_sample_memory(args.duration, args.rate, len(parts))
     show = bool(args.progress) or (sys.stderr.isatty() and args.duration >= 10.0)
-    progress = ProgressBar("simulating", args.duration, show)
+    progress = ProgressBar("simulating", args.duration, show, unit="sim s")
     warmup = _warm_up(params)
     started = time.perf_counter()
     try:
