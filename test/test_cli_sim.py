@@ -99,7 +99,12 @@ def test_plot_directory(tmp_path: Path) -> None:
     figures = tmp_path / "figs"
     assert main(["sim", "--duration", "0.1", "--plot", str(figures)]) == 0
     names = sorted(p.name for p in figures.iterdir())
-    pngs = ["carrier_displacement.png", "first_40ms.png", "phase_portrait.png"]
+    pngs = [
+        "carrier_displacement.png",
+        "first_40ms.png",
+        "parts_over_run.png",
+        "phase_portrait.png",
+    ]
     assert names == [".feeder-outputs", *pngs]
     assert (figures / ".feeder-outputs").read_text().splitlines() == pngs
 

@@ -20,7 +20,7 @@ import numpy as np
 import numpy.typing as npt
 from matplotlib.figure import Figure
 
-from feeder_ros.figures import save_figure
+from feeder_ros.figures import envelope, save_figure
 from feeder_ros.physics.parameters import FeederParameters
 from feeder_ros.physics.simulation import EventKind, PartSpec, SimulationResult, simulate
 
@@ -32,6 +32,7 @@ __all__ = [
     "detail_run",
     "plot_case_study",
     "plot_result",
+    "window_speeds",
 ]
 
 CASE_STUDY_AMPLITUDES_N = (0.4, 40.0)
@@ -100,7 +101,8 @@ def plot_result(
     prefix: str = "",
     detail: SimulationResult | None = None,
 ) -> list[Path]:
-    """Fig. 8-style figures for one result: displacement, phase portrait, first-40-ms detail.
+    """Fig. 8-style figures for one result: displacement (its envelope over a long run), phase
+    portrait, first-40-ms detail; with parts, their track position and speed over the run.
 
     ``detail`` (e.g. :func:`detail_run`) is drawn in the detail figure instead of ``result``'s
     first 40 ms, so that events show at their true instants rather than at the next sample.
@@ -112,9 +114,15 @@ def plot_result(
 
     fig = Figure(figsize=(8, 3.5), layout="constrained")
     ax = fig.add_subplot()
-    ax.plot(t, result.carrier_x_m * 1e6, lw=0.5)
+    middle, lowest, highest = envelope(t, result.carrier_x_m * 1e6)
+    if middle.size < t.size:  # a long run: its envelope (a line would be a solid block)
+        ax.fill_between(middle, lowest, highest, lw=0.0, alpha=0.6, label="min-max envelope")
+        ax.legend(loc="upper right", fontsize="small")
+    else:
+        ax.plot(t, result.carrier_x_m * 1e6, lw=0.5)
     ax.set(xlabel="t [s]", ylabel="carrier displacement v [µm]", title=f"Carrier ({label})")
     paths.append(save_figure(fig, out_dir / f"{prefix}carrier_displacement.png"))
+    whole = result
 
     fig = Figure(figsize=(5, 5), layout="constrained")
     ax = fig.add_subplot()
@@ -146,7 +154,50 @@ def plot_result(
     ax_p.set(xlabel="t [ms]", ylabel="part 0 phase", yticks=list(PHASE_NAMES))
     ax_p.set_yticklabels(list(PHASE_NAMES.values()))
     paths.append(save_figure(fig, out_dir / f"{prefix}first_40ms.png"))
+    if whole.part_x_m.ndim == 2 and whole.part_x_m.shape[1] > 0 and whole.t_s.size > 1:
+        paths.append(_plot_parts(whole, label, out_dir / f"{prefix}parts_over_run.png"))
     return paths
+
+
+#: parts drawn in the parts figure at most (the first ones)
+PLOTTED_PARTS = 10
+
+
+def window_speeds(
+    t: npt.NDArray[np.float64], track: npt.NDArray[np.float64], windows: int = 100
+) -> tuple[npt.NDArray[np.float64], npt.NDArray[np.float64]]:
+    """``(t_edges, speed)``: each part's mean speed along the track over ``windows`` equal spans
+    of the run (speed (windows, k) in m/s from the track positions ``track`` (n, k) at the sorted
+    times ``t`` (n,); NaN over a span in which the part was not on the track throughout). Spans
+    are whole samples: at least one sample interval each."""
+    n = t.size
+    edges = np.unique(np.linspace(0, n - 1, min(windows, n - 1) + 1).round().astype(np.int64))
+    dt = np.diff(t[edges])
+    return t[edges], np.diff(track[edges], axis=0) / dt[:, None]
+
+
+def _plot_parts(result: SimulationResult, label: str, path: Path) -> Path:
+    """Track position and mean speed of the first :data:`PLOTTED_PARTS` parts over the run."""
+    t = result.t_s
+    count = result.part_x_m.shape[1]
+    shown = min(count, PLOTTED_PARTS)
+    track = result.part_x_m[:, :shown] - result.carrier_x_m[:, None]
+    fig = Figure(figsize=(8, 6), layout="constrained")
+    ax_x, ax_v = fig.subplots(2, 1, sharex=True)
+    middle, lowest, highest = envelope(t, track * 1e3)
+    edges, speeds = window_speeds(t, track)
+    for k in range(shown):
+        ax_x.plot(middle, 0.5 * (lowest[:, k] + highest[:, k]), lw=1.0, label=f"part {k}")
+        ax_v.stairs(speeds[:, k] * 1e3, edges, lw=1.0, baseline=None)
+    which = f"the first {shown} of {count} parts" if shown < count else f"{count} part(s)"
+    ax_x.set(ylabel="track position [mm]", title=f"Parts over the run ({which}, {label})")
+    if shown > 1:
+        ax_x.legend(loc="upper left", fontsize="small", ncols=2)
+    span = (edges[-1] - edges[0]) / max(edges.size - 1, 1)
+    ax_v.set(xlabel="t [s]", ylabel=f"mean speed over {span:.3g} s [mm/s]")
+    ax_v.axhline(0.0, color="0.6", lw=0.5)
+    ax_v.set_xlim(t[0], t[-1])  # the whole run, as the carrier figure
+    return save_figure(fig, path)
 
 
 def plot_case_study(

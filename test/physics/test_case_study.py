@@ -60,7 +60,7 @@ def test_fig8_equivalents_are_written(tmp_path: Path) -> None:
     assert [p.name for p in paths] == [
         f"A{a}N_{name}.png"
         for a in ("0.4", "40")
-        for name in ("carrier_displacement", "phase_portrait", "first_40ms")
+        for name in ("carrier_displacement", "phase_portrait", "first_40ms", "parts_over_run")
     ]
     for path in paths:
         assert path.read_bytes()[:8] == b"\x89PNG\r\n\x1a\n"
