@@ -48,6 +48,12 @@ def test_end_to_end_writes_the_report(tmp_path: Path, capsys: pytest.CaptureFixt
     ]
     assert f"{record['evaluations']} designs evaluated" in printed
     assert "sensitivity at the optimum" in printed
+    # the optimum as built: the tolerances' draws, in the terminal and in design.json
+    built = record["robustness"]
+    assert built["samples"] == 64
+    assert set(built["probability_by_condition"]) == set(optimum["constraints"])
+    assert f"every condition met in {100 * built['probability_all_conditions']:.0f} %" in printed
+    assert built["robust"] == (built["probability_all_conditions"] >= 0.95)
 
     # the parameter file: the simulator's ros__parameters, loading back to the optimum
     params_file = out / "optimum_params.yaml"

@@ -141,6 +141,7 @@ def run(args: argparse.Namespace) -> int:
         population_size,
     )
     from feeder_ros.design.report import sensitivity_text, summary, write_report
+    from feeder_ros.design.robustness import assess, robustness_text
     from feeder_ros.design.sensitivity import sensitivity_table
 
     if args.objective == "min-force" and args.target_speed is None:
@@ -181,11 +182,22 @@ def run(args: argparse.Namespace) -> int:
     finally:
         bar.close()
     rows = sensitivity_table(problem, result.params)
+    built = assess(problem, result.params, design.tolerances)
     print(summary(result, reference, plant_label, args.seed))
     print(sensitivity_text(rows))
+    print(robustness_text(built, design.tolerances))
+    for line in built.warnings:
+        print(f"feeder design: warning: at the optimum, {line}", file=sys.stderr)
+    if result.feasible and not built.robust:
+        print(
+            f"feeder design: warning: the optimum meets every condition in only "
+            f"{100 * built.all_met:.0f} % of the plants within the tolerances (a robust design: "
+            f">= {100 * built.promised:g} %): it works near its nominal values only",
+            file=sys.stderr,
+        )
     if args.output is not None:
         written = write_report(
-            Path(args.output), result, reference, rows, args.seed, args.map_points
+            Path(args.output), result, reference, rows, args.seed, args.map_points, built.record()
         )
         for path in written:
             print(f"wrote {path}")

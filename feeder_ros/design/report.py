@@ -197,6 +197,7 @@ def write_report(
     rows: Sequence[SensitivityRow],
     seed: int,
     map_points: int,
+    robustness: dict[str, object] | None = None,
 ) -> list[Path]:
     """Write the report files into ``out_dir`` (created if needed); returns their paths. The
     speed map simulates ``map_points`` x ``map_points`` designs around the optimum."""
@@ -220,6 +221,7 @@ def write_report(
         "plant": problem.plant.as_dict(),
         "optimum": evaluation_record(problem, result.best),
         "reference": evaluation_record(problem, reference),
+        "robustness": robustness,
         "history": [list(item) for item in result.history],
     }
     path = out_dir / "design.json"

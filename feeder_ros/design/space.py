@@ -41,6 +41,7 @@ __all__ = [
     "DesignError",
     "DesignSpace",
     "DesignVariable",
+    "Tolerances",
     "load_design_config",
 ]
 
@@ -56,7 +57,7 @@ DESIGN_VARIABLES: tuple[str, ...] = (
     "drive_frequency_hz",
     "drive_amplitude_n",
 )
-_SECTIONS = ("variables", "conditions", "evaluation", "reference")
+_SECTIONS = ("variables", "conditions", "evaluation", "reference", "tolerances")
 
 
 class DesignError(ParameterError):
@@ -195,14 +196,70 @@ class DesignSpace:
         return np.array([float(getattr(params, name)) for name in self.names], dtype=np.float64)
 
 
+#: scatter of a built feeder by default: +- half-widths, relative (fraction of the value)
+DEFAULT_RELATIVE = {
+    "forward_length_m": 0.01,
+    "backward_length_m": 0.01,
+    "plate_thickness_m": 0.01,
+    "static_friction": 0.30,
+    "kinetic_friction": 0.30,
+    "part_mass_kg": 0.05,
+    "drive_amplitude_n": 0.03,
+}
+#: ... and absolute (in the parameter's unit)
+DEFAULT_ABSOLUTE = {"plate_angle_deg": 0.5}
+
+
+@dataclass(frozen=True)
+class Tolerances:
+    """Uniform scatter of the inputs: ``relative`` (+- fraction of the value) and ``absolute``
+    (+- in the parameter's unit) half-widths by parameter name; ``samples`` plants drawn with
+    ``seed``; ``probability``: the share of plants a robust design must meet every condition in
+    (reported against)."""
+
+    relative: Mapping[str, float] = field(default_factory=lambda: dict(DEFAULT_RELATIVE))
+    absolute: Mapping[str, float] = field(default_factory=lambda: dict(DEFAULT_ABSOLUTE))
+    samples: int = 64
+    seed: int = 1
+    probability: float = 0.95
+
+    def __post_init__(self) -> None:
+        for kind, table in (("relative", self.relative), ("absolute", self.absolute)):
+            if not isinstance(table, Mapping):
+                raise DesignError(f"{kind}: expected name: half-width, got {table!r}")
+            for name, value in table.items():
+                if name not in PARAMETER_SPECS or PARAMETER_SPECS[name].kind is not float:
+                    raise DesignError(f"{kind}: {name!r} is not a real-valued parameter")
+                ok = is_number(value) and math.isfinite(value) and value >= 0.0
+                if not ok or (kind == "relative" and value >= 1.0):
+                    limit = "in [0, 1)" if kind == "relative" else "finite and >= 0"
+                    raise DesignError(f"{kind}.{name}={value!r} must be {limit}")
+        both = sorted(set(self.relative) & set(self.absolute))
+        if both:
+            raise DesignError(f"{', '.join(both)} both relative and absolute")
+        if not (isinstance(self.samples, int) and 8 <= self.samples <= 10_000):
+            raise DesignError(f"samples={self.samples!r} must be an integer in [8, 10000]")
+        if not isinstance(self.seed, int):
+            raise DesignError(f"seed={self.seed!r} must be an integer")
+        p = self.probability
+        if not (is_number(p) and 0.0 < p <= 1.0):
+            raise DesignError(f"probability={p!r} must be in (0, 1]")
+
+    @property
+    def names(self) -> tuple[str, ...]:
+        return tuple(self.relative) + tuple(self.absolute)
+
+
 @dataclass(frozen=True)
 class DesignConfig:
-    """A design file: the space, the condition limits, the evaluation window, the reference."""
+    """A design file: the space, the condition limits, the evaluation window, the reference, the
+    tolerances a built feeder scatters within."""
 
     space: DesignSpace
     limits: ConditionLimits = field(default_factory=ConditionLimits)
     window: EvaluationWindow = field(default_factory=EvaluationWindow)
     reference: Mapping[str, float | int | str] = field(default_factory=dict)
+    tolerances: Tolerances = field(default_factory=lambda: Tolerances())
 
     @classmethod
     def from_mapping(cls, document: Mapping[str, Any], source: str = "design") -> DesignConfig:
@@ -225,7 +282,8 @@ class DesignConfig:
             FeederParameters.from_mapping(reference)
         except ParameterError as error:
             raise DesignError(f"reference: {error}") from None
-        return cls(space, limits, window, dict(reference))
+        tolerances = _settings(Tolerances, document.get("tolerances"), "tolerances")
+        return cls(space, limits, window, dict(reference), tolerances)
 
     def reference_parameters(self, plant: FeederParameters) -> FeederParameters:
         """The plant with the reference design put in."""

@@ -143,7 +143,7 @@ def test_missing_variables_and_bad_yaml(tmp_path: Path) -> None:
     path = _write(tmp_path, "")
     with pytest.raises(DesignError) as empty:
         load_design_config(path)
-    expected = f"{path}: expected sections variables, conditions, evaluation, reference"
+    expected = f"{path}: expected sections variables, conditions, evaluation, reference, tolerances"
     assert str(empty.value) == expected  # the file named once
     path.write_bytes(b"\xff\xfe")
     with pytest.raises(DesignError, match=r"design.yaml: not UTF-8 text \(invalid start byte"):
