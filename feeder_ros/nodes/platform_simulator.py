@@ -53,7 +53,7 @@ from feeder_ros.nodes.platform_simulator_parameters import (
 )
 from feeder_ros.nodes.ros_parameters import declare_parameters, validator
 from feeder_ros.nodes.runner import run_node
-from feeder_ros.physics.command_policy import Command, decide
+from feeder_ros.physics.command_policy import Command, Decision, decide
 from feeder_ros.physics.drive import DriveError
 from feeder_ros.physics.errors import SimulationError
 from feeder_ros.physics.parameters import PARAMETER_SPECS, FeederParameters, ParameterError
@@ -67,6 +67,8 @@ if TYPE_CHECKING:
     from feeder_ros.ros_compat import AnyParameter
 
 PHYSICS_DEFAULTS = FeederParameters().as_dict()
+#: a drive command's warning of one kind is logged at most this often
+WARNING_PERIOD_S = 5.0
 #: the model's drive parameters mean something else to the node: its drive comes from
 #: drive/command (the drive interface), never from a parameter. They stay declared, read-only,
 #: so the simulator's YAML (shared with ``feeder sim``, whose drive they are) loads without a
@@ -230,6 +232,7 @@ class PlatformSimulator(Node):
 
         self._failure: str | None = None  # the last solver failure, until the drive runs again
         self._late_commands = 0  # commands applied at once because the simulation lagged
+        self._warned_at: dict[str, float] = {}  # command warnings: kind -> last logged (s)
         self._start()
         self._timer = self.create_timer(self._values["tick_period_s"], self._tick, clock=self._wall)
         self._diagnostics_pub = pub(DiagnosticArray, "/diagnostics", 10)
@@ -370,8 +373,7 @@ class PlatformSimulator(Node):
             decision = decide(
                 command, now, self._lag_s(), self._values["command_timeout_s"], self._drive
             )
-            if decision.warning:
-                self.get_logger().warning(decision.warning, throttle_duration_sec=5.0)
+            self._warn(decision)
             if decision.action == "stop":
                 self._stop_drive(now)
             if decision.action not in ("schedule", "refresh"):
@@ -390,6 +392,16 @@ class PlatformSimulator(Node):
                 if decision.amplitude_n > 0.0:
                     self._failure = None  # driven again: the next failure reports itself
             self._command_deadline_s = decision.deadline_s
+
+    def _warn(self, decision: Decision) -> None:
+        """Log a command's warning, at most once per 5 s for each kind of problem (rclpy's
+        throttle counts per call site: one kind repeated would hide the others)."""
+        if not decision.warning:
+            return
+        now = time.monotonic()
+        if now - self._warned_at.get(decision.problem, -math.inf) >= WARNING_PERIOD_S:
+            self._warned_at[decision.problem] = now
+            self.get_logger().warning(decision.warning)
 
     def _recover(self, error: SimulationError) -> None:
         """The solver cannot continue (for example an undamped branch driven exactly at its

@@ -66,6 +66,9 @@ class Decision:
 
     action: Literal["ignore", "stop", "schedule", "refresh"]
     warning: str = ""
+    #: what the warning is about: "malformed", "stale" or "ahead" ("" without a warning); a node
+    #: throttles each kind on its own, so that one kind repeated does not hide another
+    problem: Literal["", "malformed", "stale", "ahead"] = ""
     at_s: float = math.nan
     frequency_hz: float = math.nan
     amplitude_n: float = math.nan
@@ -103,13 +106,14 @@ def decide(
     ``drive`` = (frequency, amplitude)) does with ``command``; see the module docstring."""
     problem = malformed(command)
     if problem:
-        return Decision("ignore", problem)
+        return Decision("ignore", problem, "malformed")
     at = now_s if command.stamp_s is None else command.stamp_s
     if timeout_s > 0.0 and at < now_s - timeout_s:
         return Decision(
             "stop",
             f"drive command stamped {now_s - at:.3f} s ago (> command_timeout_s={timeout_s}): "
             "treated as stop",
+            "stale",
             at_s=now_s,
         )
     late = False
@@ -122,6 +126,7 @@ def decide(
             f"(stamp {command.stamp_text or f'{at:.9f}'}, more than "
             f"{FUTURE_STAMP_TOLERANCE_S:g} s ahead): do the commander and the simulator use the "
             "same clock (use_sim_time)?",
+            "ahead",
         )
     at = max(at, now_s)
     frequency = command.frequency_hz if command.enabled else drive[0]

@@ -36,7 +36,7 @@ def _go(stamp: float | None, frequency: float = 30.0, amplitude: float = 50.0) -
 )
 def test_malformed_commands_are_ignored_naming_the_values(command: Command) -> None:
     decision = decide(command, NOW, LAG, TIMEOUT, DRIVE)
-    assert decision.action == "ignore"
+    assert (decision.action, decision.problem) == ("ignore", "malformed")
     assert decision.warning.startswith("ignoring malformed drive command: ")
     assert f"frequency_hz={command.frequency_hz!r}" in decision.warning
     assert f"ramp_time_s={command.ramp_time_s!r} (finite, >= 0)" in decision.warning
@@ -51,6 +51,7 @@ def test_a_stop_keeps_the_frequency_whatever_its_fields_say() -> None:
 def test_unstamped_is_now_and_a_repeat_only_refreshes_the_deadline() -> None:
     new = decide(_go(None), NOW, LAG, TIMEOUT, DRIVE)
     assert (new.action, new.at_s, new.amplitude_n, new.late) == ("schedule", NOW, 50.0, False)
+    assert (new.warning, new.problem) == ("", "")
     repeat = decide(_go(None, amplitude=40.0), NOW, LAG, TIMEOUT, DRIVE)
     assert (repeat.action, repeat.deadline_s) == ("refresh", NOW + TIMEOUT)
     # stamped ahead within the lag: for the present, and the same drive
@@ -62,7 +63,7 @@ def test_unstamped_is_now_and_a_repeat_only_refreshes_the_deadline() -> None:
 
 def test_a_stale_command_is_a_stop_and_a_past_one_within_the_timeout_is_now() -> None:
     stale = decide(_go(NOW - TIMEOUT - 0.25), NOW, LAG, TIMEOUT, DRIVE)
-    assert stale.action == "stop"
+    assert (stale.action, stale.problem) == ("stop", "stale")
     assert stale.warning == (
         "drive command stamped 1.250 s ago (> command_timeout_s=1.0): treated as stop"
     )
@@ -76,7 +77,7 @@ def test_ahead_by_the_lag_is_late_and_beyond_the_tolerance_is_refused() -> None:
     lagging = decide(_go(NOW + LAG + FUTURE_STAMP_TOLERANCE_S), NOW, LAG, TIMEOUT, DRIVE)
     assert (lagging.action, lagging.at_s, lagging.late) == ("schedule", NOW, True)
     far = decide(_go(NOW + LAG + FUTURE_STAMP_TOLERANCE_S + 0.01), NOW, LAG, TIMEOUT, DRIVE)
-    assert far.action == "ignore"
+    assert (far.action, far.problem) == ("ignore", "ahead")
     assert far.warning.startswith(
         "ignoring drive command stamped 1.310 s ahead of the simulation clock (stamp "
         "stamp-text, more than 1 s ahead)"
