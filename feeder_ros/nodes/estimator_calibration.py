@@ -265,8 +265,8 @@ class EstimatorCalibration:
 
     def stream_advanced(self) -> None:
         """The estimator has taken in more samples: the transits that waited for them."""
-        if not self._enabled:
-            return
+        if not self._enabled or not self._source.waiting:
+            return  # (called on every publish: no lock unless a transit waits)
         with self._lock:
             outcomes = self._source.due(self._estimator())
         for outcome in outcomes:

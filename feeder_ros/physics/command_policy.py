@@ -102,7 +102,7 @@ def decide(
     timeout_s: float,
     drive: tuple[float, float],
 ) -> Decision:
-    """What the simulator at ``now_s`` (lagging the wall clock by ``lag_s``, drive in force
+    """What the simulator at ``now_s`` (lagging the wall clock by ``lag_s`` >= 0, drive in force
     ``drive`` = (frequency, amplitude)) does with ``command``; see the module docstring."""
     problem = malformed(command)
     if problem:
@@ -128,12 +128,12 @@ def decide(
             "same clock (use_sim_time)?",
             "ahead",
         )
-    at = max(at, now_s)
+    at = max(at, now_s)  # never ahead here: within the lag it is now, beyond it refused
     frequency = command.frequency_hz if command.enabled else drive[0]
     amplitude = command.amplitude_n if command.enabled else 0.0
     deadline = at + timeout_s if timeout_s > 0.0 else math.inf
     action: Literal["schedule", "refresh"] = (
-        "schedule" if (frequency, amplitude) != drive or at > now_s else "refresh"
+        "schedule" if (frequency, amplitude) != drive else "refresh"
     )
     return Decision(
         action,
