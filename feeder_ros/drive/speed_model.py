@@ -97,6 +97,19 @@ class TableSpeedModel:
         row = int(np.argmin(np.abs(self.frequencies_hz - frequency_hz)))
         return float(np.interp(amplitude_percent, self.amplitudes_percent, self.speeds_mps[row]))
 
+    def amplitude_sensitivity(self, frequency_hz: float, amplitude_percent: float) -> float:
+        """The relative change of the predicted speed per relative change of the amplitude,
+        ``d ln v / d ln A``, at a tabulated frequency (the nearest row): the slope of the
+        amplitude interval holding ``amplitude_percent`` (the table is linear inside it).
+        NaN where the speed is not positive or the slope not finite."""
+        row = int(np.argmin(np.abs(self.frequencies_hz - frequency_hz)))
+        a, v = self.amplitudes_percent, self.speeds_mps[row]
+        j = int(np.clip(np.searchsorted(a, amplitude_percent) - 1, 0, a.size - 2))
+        speed = float(np.interp(amplitude_percent, a, v))
+        slope = float((v[j + 1] - v[j]) / (a[j + 1] - a[j]))
+        value = slope * amplitude_percent / speed if speed > 0.0 else math.nan
+        return value if math.isfinite(value) else math.nan
+
     def choose(self, speed_mps: float) -> SpeedChoice | None:
         if not math.isfinite(speed_mps):
             return None

@@ -370,7 +370,8 @@ SPEED_FEEDBACK_PARAMETERS = (
         "speed_trim.gain",
         float,
         "1",
-        "speed trim: fraction of the relative speed error corrected per step",
+        "speed trim: fraction of the relative speed error corrected per step (through the "
+        "speed model's sensitivity of speed to amplitude)",
         0.0,
         2.0,
         exclusive_minimum=True,
@@ -392,6 +393,25 @@ SPEED_FEEDBACK_PARAMETERS = (
         "are not used",
         0.0,
         2.0,
+        exclusive_minimum=True,
+    ),
+    ParameterSpec(
+        "speed_trim.transit_wait_s",
+        float,
+        "s",
+        "speed trim: while the part model calibrates (calibration_topic), hold each setting "
+        "until a sensor transit of it is used, at most this long; 0: never hold",
+        0.0,
+        600.0,
+    ),
+    ParameterSpec(
+        "speed_trim.calibrated_below",
+        float,
+        "1",
+        "speed trim: the part model counts as calibrated (no more holds) at two or more "
+        "operating points and a friction uncertainty below this (relative)",
+        0.0,
+        1.0,
         exclusive_minimum=True,
     ),
 )
@@ -634,9 +654,11 @@ DEFAULTS: dict[str, Any] = {
     "calibration_topic": "calibration",
     "speed_trim.enabled": True,
     "speed_trim.estimate_topic": "estimate",
-    "speed_trim.gain": 0.6,
+    "speed_trim.gain": 0.8,
     "speed_trim.max_step": 0.15,
     "speed_trim.max_uncertainty": 0.03,
+    "speed_trim.transit_wait_s": 20.0,
+    "speed_trim.calibrated_below": 0.05,
     "part_sensor_count": 2,
     "level.mode": "off",
     "level.full_sensor_index": 1,

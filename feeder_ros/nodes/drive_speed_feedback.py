@@ -13,7 +13,10 @@ drive interface node).
 * **Speed trim.** With ``speed_trim.enabled``, target-speed mode closes the loop on the estimate
   (:class:`~feeder_ros.drive.speed_trim.SpeedTrim`): once the estimate is trustworthy (its
   uncertainty below ``speed_trim.max_uncertainty`` of the target), each estimate of the current
-  setting trims the amplitude towards the target, through the controller's limits and ramps.
+  setting trims the amplitude towards the target, scaled by the physics table's sensitivity of
+  speed to amplitude at the set point, through the controller's limits and ramps. While the
+  part model calibrates, each setting is held until a sensor transit of it has been used (at
+  most ``speed_trim.transit_wait_s``): a step would void the transits in flight.
   Resonance tracking, when active, trims by itself; the speed trim then stands aside.
 """
 
@@ -28,7 +31,7 @@ from rclpy.node import Node
 from rclpy.qos import DurabilityPolicy, QoSProfile, ReliabilityPolicy
 
 from feeder_ros.drive.controller import DriveController
-from feeder_ros.drive.speed_model import SpeedModel
+from feeder_ros.drive.speed_model import SpeedModel, TableSpeedModel
 from feeder_ros.drive.speed_trim import SpeedTrim, TrimSettings
 from feeder_ros.msg import PartCalibration, VehicleEstimate
 from feeder_ros.physics.parameters import FeederParameters, ParameterError
@@ -48,6 +51,8 @@ def trim_settings_from(values: dict[str, Any]) -> TrimSettings:
         gain=values["speed_trim.gain"],
         max_step=values["speed_trim.max_step"],
         max_uncertainty=values["speed_trim.max_uncertainty"],
+        transit_wait_s=values["speed_trim.transit_wait_s"],
+        calibrated_below=values["speed_trim.calibrated_below"],
     )
 
 
@@ -71,6 +76,7 @@ class SpeedFeedback:
         self._table_plant: FeederParameters | None = None  # the one the table was built for
         self._trim = SpeedTrim(trim_settings_from(values))
         self._seen_point: tuple[float, float, bool] | None = None
+        self._transits_used = 0  # as the last calibration message said
         self.calibration_note = "not configured"
         # the table rebuild runs in a worker thread: what it builds, what it built, what next
         self._build_lock = threading.Lock()
@@ -92,6 +98,7 @@ class SpeedFeedback:
         self._rebuild = rebuild
         self._trim = SpeedTrim(trim_settings_from(self._values))
         self._seen_point = None
+        self._transits_used = 0
         node = self._node
         topic = self._values["calibration_topic"]
         if rebuild is not None and topic:
@@ -152,13 +159,21 @@ class SpeedFeedback:
         if not (controller.running and controller.speed_mode) or self._seen_point is None:
             return
         stamp = message.header.stamp
+        point = controller.set_point
+        model = controller.speed_model
+        sensitivity = (
+            model.amplitude_sensitivity(point.frequency_hz, point.amplitude_percent)
+            if isinstance(model, TableSpeedModel)
+            else math.nan  # an identified model: unknown, the trim takes 1
+        )
         amplitude = self._trim.reading(
             float(stamp.sec) + float(stamp.nanosec) * 1e-9,
             message.window_s,
             message.mean_speed_mps,
             message.mean_speed_uncertainty_mps,
             controller.target_speed_mps,
-            controller.set_point.amplitude_percent,
+            point.amplitude_percent,
+            sensitivity,
         )
         if amplitude is None:
             return
@@ -172,6 +187,15 @@ class SpeedFeedback:
 
     # -- calibration -------------------------------------------------------------------------
     def _on_calibration(self, message: PartCalibration) -> None:
+        stamp = message.header.stamp
+        used = int(message.transits_used)
+        self._trim.calibration(
+            float(stamp.sec) + float(stamp.nanosec) * 1e-9,
+            used > self._transits_used,
+            int(message.operating_points),
+            max(message.stick_limit_uncertainty, message.slip_deceleration_uncertainty),
+        )
+        self._transits_used = used
         controller, plant, rebuild = self._controller, self._plant, self._rebuild
         if controller is None or plant is None or rebuild is None:
             return

@@ -54,6 +54,17 @@ def test_choose_avoids_the_steep_slip_threshold() -> None:
     assert (choice.frequency_hz, choice.amplitude_percent) == (20.0, pytest.approx(25.0))
 
 
+def test_amplitude_sensitivity_is_the_tables_log_slope() -> None:
+    """v = c*A^0.5 sampled on the grid: the interval's slope times A/v; NaN where v <= 0."""
+    amplitudes = np.array([10.0, 20.0, 40.0, 80.0])
+    model = TableSpeedModel([30.0], amplitudes, [[-0.001, 0.0, 0.002, 0.004]])
+    # 40..80 %: slope 0.002/40 per %, at 60 % v = 0.003: 0.05e-3 * 60 / 0.003 = 1
+    assert model.amplitude_sensitivity(30.0, 60.0) == pytest.approx(1.0)
+    assert model.amplitude_sensitivity(31.0, 30.0) == pytest.approx(1e-4 * 30.0 / 0.001)
+    assert np.isnan(model.amplitude_sensitivity(30.0, 15.0))  # v = -0.0005 there
+    assert np.isnan(model.amplitude_sensitivity(30.0, 20.0))  # v = 0
+
+
 def test_table_shape_and_grid_are_validated() -> None:
     with pytest.raises(ValueError, match="shape"):
         TableSpeedModel([20.0], [0.0, 100.0], [[0.0, 0.1, 0.2]])
