@@ -110,14 +110,20 @@ class TableSpeedModel:
         value = slope * amplitude_percent / speed if speed > 0.0 else math.nan
         return value if math.isfinite(value) else math.nan
 
-    def choose(self, speed_mps: float) -> SpeedChoice | None:
+    def choose(self, speed_mps: float, frequency_hz: float | None = None) -> SpeedChoice | None:
+        """See the class docstring; with ``frequency_hz``, at that tabulated frequency only (the
+        nearest row)."""
         if not math.isfinite(speed_mps):
             return None
         best: SpeedChoice | None = None
         best_key = (math.inf, math.inf)
         a = self.amplitudes_percent
-        for row, frequency in enumerate(self.frequencies_hz):
-            v = self.speeds_mps[row]
+        rows = range(self.frequencies_hz.size)
+        if frequency_hz is not None:
+            nearest = int(np.argmin(np.abs(self.frequencies_hz - frequency_hz)))
+            rows = range(nearest, nearest + 1)
+        for row in rows:
+            frequency, v = self.frequencies_hz[row], self.speeds_mps[row]
             for j in range(a.size - 1):
                 v0, v1 = v[j], v[j + 1]
                 if not min(v0, v1) <= speed_mps <= max(v0, v1):

@@ -399,20 +399,10 @@ SPEED_FEEDBACK_PARAMETERS = (
         "speed_trim.transit_wait_s",
         float,
         "s",
-        "speed trim: while the part model calibrates (calibration_topic), hold each setting "
-        "until a sensor transit of it is used, at most this long; 0: never hold",
+        "speed trim: once the calibration (calibration_topic) uses sensor transits, hold each "
+        "setting until a transit of it is used, at most this long; 0: never hold",
         0.0,
         600.0,
-    ),
-    ParameterSpec(
-        "speed_trim.calibrated_below",
-        float,
-        "1",
-        "speed trim: the part model counts as calibrated (no more holds) at two or more "
-        "operating points and a friction uncertainty below this (relative)",
-        0.0,
-        1.0,
-        exclusive_minimum=True,
     ),
 )
 _LEVEL = "track level control: "
@@ -658,7 +648,6 @@ DEFAULTS: dict[str, Any] = {
     "speed_trim.max_step": 0.15,
     "speed_trim.max_uncertainty": 0.03,
     "speed_trim.transit_wait_s": 20.0,
-    "speed_trim.calibrated_below": 0.05,
     "part_sensor_count": 2,
     "level.mode": "off",
     "level.full_sensor_index": 1,

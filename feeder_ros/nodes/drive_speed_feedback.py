@@ -6,16 +6,16 @@ drive interface node).
   ``feeder_ros/PartCalibration``, latched). Each calibration that moves the friction by more than
   0.5 % rebuilds the table in a worker thread (the exact engine takes about a second for the
   demo's grid and releases the GIL; the cache keeps the table) and, once it is built, in
-  target-speed mode, chooses the set point for the target again when the new table picks
-  another frequency (at the same frequency the trimmed amplitude is kept). A reset calibration
-  (state NOMINAL) returns to the configured friction. An identified speed model (a file) is
-  measured, not simulated: it is kept.
+  target-speed mode, chooses the set point for the target again only when the frequency in use
+  no longer reaches the target in the new table (else the trimmed set point is kept). A reset
+  calibration (state NOMINAL) returns to the configured friction. An identified speed model (a
+  file) is measured, not simulated: it is kept.
 * **Speed trim.** With ``speed_trim.enabled``, target-speed mode closes the loop on the estimate
   (:class:`~feeder_ros.drive.speed_trim.SpeedTrim`): once the estimate is trustworthy (its
   uncertainty below ``speed_trim.max_uncertainty`` of the target), each estimate of the current
   setting trims the amplitude towards the target, scaled by the physics table's sensitivity of
-  speed to amplitude at the set point, through the controller's limits and ramps. While the
-  part model calibrates, each setting is held until a sensor transit of it has been used (at
+  speed to amplitude at the set point, through the controller's limits and ramps. When the
+  calibration uses sensor transits, each setting is held until a transit of it has been used (at
   most ``speed_trim.transit_wait_s``): a step would void the transits in flight.
   Resonance tracking, when active, trims by itself; the speed trim then stands aside.
 """
@@ -52,7 +52,6 @@ def trim_settings_from(values: dict[str, Any]) -> TrimSettings:
         max_step=values["speed_trim.max_step"],
         max_uncertainty=values["speed_trim.max_uncertainty"],
         transit_wait_s=values["speed_trim.transit_wait_s"],
-        calibrated_below=values["speed_trim.calibrated_below"],
     )
 
 
@@ -189,13 +188,9 @@ class SpeedFeedback:
     def _on_calibration(self, message: PartCalibration) -> None:
         stamp = message.header.stamp
         used = int(message.transits_used)
-        self._trim.calibration(
-            float(stamp.sec) + float(stamp.nanosec) * 1e-9,
-            used > self._transits_used,
-            int(message.operating_points),
-            max(message.stick_limit_uncertainty, message.slip_deceleration_uncertainty),
-        )
-        self._transits_used = used
+        if used > self._transits_used:
+            self._trim.transit_used(float(stamp.sec) + float(stamp.nanosec) * 1e-9)
+        self._transits_used = used  # (fewer: a reset)
         controller, plant, rebuild = self._controller, self._plant, self._rebuild
         if controller is None or plant is None or rebuild is None:
             return
@@ -271,10 +266,18 @@ class SpeedFeedback:
         self._node.get_logger().info(f"speed model recalibrated: {self.calibration_note}")
         if controller.speed_mode and math.isfinite(controller.target_speed_mps):
             trimmed = controller.set_point
-            choice = model.choose(controller.target_speed_mps)
-            if choice is not None and math.isclose(choice.frequency_hz, trimmed.frequency_hz):
-                # the same frequency: the trim's amplitude already holds the target on the real
-                # feeder; a new table choice would throw its work away
+            if isinstance(model, TableSpeedModel):
+                keep = model.choose(controller.target_speed_mps, trimmed.frequency_hz) is not None
+            else:
+                choice = model.choose(controller.target_speed_mps)
+                keep = choice is not None and math.isclose(
+                    choice.frequency_hz, trimmed.frequency_hz
+                )
+            if keep:
+                # the frequency in use still reaches the target: the trim's amplitude holds it
+                # on the real feeder. A new choice would throw that work away, and a frequency
+                # hop on every small recalibration (seen in the demo: 30 -> 22 -> 30 Hz within
+                # 20 s) is a new operating point each time, its transits voided.
                 return
             answer = controller.set_target_speed(
                 now, controller.target_speed_mps, controller.set_ramp_time_s

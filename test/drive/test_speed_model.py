@@ -65,6 +65,20 @@ def test_amplitude_sensitivity_is_the_tables_log_slope() -> None:
     assert np.isnan(model.amplitude_sensitivity(30.0, 20.0))  # v = 0
 
 
+def test_choose_at_one_frequency_searches_that_row_only() -> None:
+    model = TableSpeedModel(
+        [20.0, 30.0], [0.0, 50.0, 100.0], [[0.0, 0.004, 0.01], [0.0, 0.002, 0.005]]
+    )
+    anywhere = model.choose(0.005)
+    assert anywhere is not None
+    assert anywhere.frequency_hz == 30.0  # the flatter bracket (2..5 mm/s)
+    at_20 = model.choose(0.005, 21.0)  # the nearest row, 20 Hz
+    assert at_20 is not None
+    assert at_20.frequency_hz == 20.0
+    assert at_20.amplitude_percent == pytest.approx(50.0 + 50.0 / 6.0)
+    assert model.choose(0.008, 30.0) is None  # 30 Hz tops out at 5 mm/s
+
+
 def test_table_shape_and_grid_are_validated() -> None:
     with pytest.raises(ValueError, match="shape"):
         TableSpeedModel([20.0], [0.0, 100.0], [[0.0, 0.1, 0.2]])

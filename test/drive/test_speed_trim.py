@@ -87,34 +87,29 @@ def test_the_models_sensitivity_brings_a_mismatched_plant_to_target_in_fewer_ste
     assert _steps_to_target(0.6, 1.0) == 7
 
 
-def test_while_the_part_model_calibrates_each_setting_waits_for_a_transit() -> None:
-    trim = _trim(gain=0.5, transit_wait_s=10.0, calibrated_below=0.05)
+def test_each_setting_waits_for_a_transit_once_the_cell_times_them() -> None:
+    trim = _trim(gain=0.5, transit_wait_s=10.0)
     # no transit used yet: this cell may have no sensors, the trim does not wait
     assert trim.reading(3.0, 1.0, 0.009, 1e-5, TARGET, 40.0) == pytest.approx(42.0)
-    trim.calibration(3.5, True, 1, 0.2)  # a transit of the old setting
+    trim.transit_used(3.5)  # a transit of the old setting
     trim.setting_changed(4.0)
     assert trim.reading(6.0, 1.0, 0.009, 1e-5, TARGET, 42.0) is None
     assert "holding the setting for a sensor transit" in trim.last_note
     assert trim.last_note.startswith("+10.00 % off")
-    trim.calibration(9.0, False, 1, 0.2)  # a refusal (no new transit): still holding
     assert trim.reading(9.5, 1.0, 0.009, 1e-5, TARGET, 42.0) is None
-    trim.calibration(10.0, True, 2, 0.2)  # one of the new setting
+    assert trim.reading(9.5, 1.0, 0.00998, 1e-5, TARGET, 42.0) is None
+    assert trim.last_note == "on target (+0.20 %)"  # (on target says so, holding or not)
+    trim.transit_used(10.0)  # one of the new setting
     assert trim.reading(10.5, 1.0, 0.009, 1e-5, TARGET, 42.0) == pytest.approx(44.1)
     # no transit comes: the hold ends after transit_wait_s
     trim.setting_changed(11.0)
     assert trim.reading(20.9, 1.0, 0.009, 1e-5, TARGET, 44.1) is None
     assert trim.reading(21.0, 1.0, 0.009, 1e-5, TARGET, 44.1) == pytest.approx(46.305)
-    # calibrated (two points, friction known to 4 %): no more holds
-    trim.calibration(21.5, True, 2, 0.04)
-    trim.setting_changed(22.0)
-    assert trim.reading(24.0, 1.0, 0.009, 1e-5, TARGET, 46.305) is not None
     with pytest.raises(ParameterError, match=r"transit_wait_s=-1"):
         TrimSettings(transit_wait_s=-1.0)
-    with pytest.raises(ParameterError, match=r"calibrated_below=0"):
-        TrimSettings(calibrated_below=0.0)
 
 
 def test_a_hold_of_zero_seconds_never_holds() -> None:
     trim = _trim(transit_wait_s=0.0)
-    trim.calibration(0.5, True, 1, 0.3)
+    trim.transit_used(0.5)
     assert trim.reading(3.0, 1.0, 0.009, 1e-5, TARGET, 40.0) is not None
