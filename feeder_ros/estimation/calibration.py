@@ -305,10 +305,14 @@ class Calibrator:
     def _estimate(self, weights: F64) -> F64:
         """The posterior mean if it fits the measurements about as well as the best particle (a
         parameter the data leave free then stays at its mean, not at a random particle's value),
-        else the best particle."""
+        else the best particle: the one of highest posterior density. (Not the largest weight:
+        after a rejuvenation the particles are drawn from the posterior and weigh the same, so
+        the largest weight picked one at random, and the estimate with it; a calibrated point of
+        the mismatch benchmark was 9.7 % off that way.)"""
         points = list(self._points.values())
         mean = weights @ self._theta
-        best = self._theta[int(np.argmax(weights))]
+        density = self._log_posterior(self._theta, [p.speeds for p in points])
+        best = self._theta[int(np.argmax(density))]
         candidates = np.vstack((mean, best))
         speeds = [p.run.speeds(self._prior, candidates) for p in points]
         log = self._log_posterior(candidates, speeds)
