@@ -26,6 +26,7 @@ from feeder_ros.physics.parameters import FeederParameters
 from feeder_ros.physics.simulation import PartSpec, simulate_many
 
 __all__ = [
+    "STEERABLE",
     "SpeedChoice",
     "SpeedModel",
     "TableSpeedModel",
@@ -36,6 +37,8 @@ __all__ = [
 
 F64 = npt.NDArray[np.float64]
 TABLE_VERSION = 1  # bump when the table's meaning changes: old cache files are then ignored
+#: sensitivities d ln v / d ln A at which the amplitude steers the speed (choice of a set point)
+STEERABLE = (0.5, 2.0)
 
 
 @dataclass(frozen=True)
@@ -65,11 +68,16 @@ class TableSpeedModel:
     """Mean part speed tabulated over frequencies x amplitudes; linear along amplitude.
 
     For a requested speed each frequency row is searched for amplitude intervals whose end speeds
-    bracket it. Of all brackets the one whose end speeds differ least wins: linear interpolation
-    inside a bracket can be off by at most that difference, so this is the setting the table
-    predicts best, and the one least sensitive to model error (near the slip threshold the speed
-    changes steeply with amplitude and a small error there is a large speed error). Ties: the
-    lower amplitude, then the lower frequency. Frequencies must be allowed set points.
+    bracket it. Steerable brackets come first: those where the speed's sensitivity to the
+    amplitude, ``d ln v / d ln A``, lies within :data:`STEERABLE`. Where it is far below 1 (a
+    plateau, where the slip pattern changes) the amplitude hardly moves the speed and the
+    friction, the part model's least known input, sets it: there the estimate is least sure and
+    the speed trim cannot correct a model error (the demo's 8 mm/s at 22 Hz / 25 %: +-6 mm/s,
+    and a trim that had not landed in 75 s). Far above 1 is the steep slip threshold. Among
+    them, the bracket whose end speeds differ least wins: linear interpolation inside a bracket
+    can be off by at most that difference, so this is the setting the table predicts best.
+    Ties: the lower amplitude, then the lower frequency. No steerable bracket: the best of the
+    others. Frequencies must be allowed set points.
     """
 
     def __init__(
@@ -116,7 +124,7 @@ class TableSpeedModel:
         if not math.isfinite(speed_mps):
             return None
         best: SpeedChoice | None = None
-        best_key = (math.inf, math.inf)
+        best_key = (math.inf, math.inf, math.inf)
         a = self.amplitudes_percent
         rows = range(self.frequencies_hz.size)
         if frequency_hz is not None:
@@ -130,7 +138,11 @@ class TableSpeedModel:
                     continue
                 fraction = 0.0 if v1 == v0 else (speed_mps - v0) / (v1 - v0)
                 amplitude = float(a[j] + fraction * (a[j + 1] - a[j]))
-                key = (float(abs(v1 - v0)), amplitude)
+                slope = (v1 - v0) / (a[j + 1] - a[j])
+                sensitivity = slope * amplitude / speed_mps if speed_mps > 0.0 else math.nan
+                low, high = STEERABLE
+                steerable = bool(low <= sensitivity <= high)
+                key = (float(not steerable), float(abs(v1 - v0)), amplitude)
                 if key < best_key:
                     best_key = key
                     best = SpeedChoice(float(frequency), amplitude, float(speed_mps))

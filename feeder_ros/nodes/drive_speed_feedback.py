@@ -74,7 +74,7 @@ class SpeedFeedback:
         self._plant: FeederParameters | None = None  # the configured plant
         self._table_plant: FeederParameters | None = None  # the one the table was built for
         self._trim = SpeedTrim(trim_settings_from(values))
-        self._seen_point: tuple[float, float, bool] | None = None
+        self._seen_point: tuple[float, float, bool, float] | None = None
         self._transits_used = 0  # as the last calibration message said
         self.calibration_note = "not configured"
         # the table rebuild runs in a worker thread: what it builds, what it built, what next
@@ -141,8 +141,7 @@ class SpeedFeedback:
         """Install a rebuilt table; tell the trim when a new setting is reached (or that
         trimming stops)."""
         self._take_built_table(controller, now)
-        point = controller.set_point
-        seen = (point.frequency_hz, point.amplitude_percent, controller.running)
+        seen = self._setting(controller)
         if not (controller.running and controller.speed_mode) or tracking_active:
             self._trim.stop()
             self._seen_point = None
@@ -151,11 +150,26 @@ class SpeedFeedback:
             self._seen_point = seen
             self._trim.setting_changed(now + controller.ramp.remaining_s(now))
 
+    @staticmethod
+    def _setting(controller: DriveController) -> tuple[float, float, bool, float]:
+        point = controller.set_point
+        return (
+            point.frequency_hz,
+            point.amplitude_percent,
+            controller.running,
+            controller.target_speed_mps,
+        )
+
     def _on_estimate(self, message: VehicleEstimate) -> None:
         controller = self._controller
         if controller is None or not self._values["speed_trim.enabled"]:
             return
         if not (controller.running and controller.speed_mode) or self._seen_point is None:
+            return
+        if self._setting(controller) != self._seen_point:
+            # a new target or set point the trim has not been told of yet (the next tick does):
+            # this estimate is of the previous setting, and judged against the new target it
+            # asked for a -15 % step when the demo's target went from 15 to 8 mm/s
             return
         stamp = message.header.stamp
         point = controller.set_point

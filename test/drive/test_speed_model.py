@@ -54,6 +54,29 @@ def test_choose_avoids_the_steep_slip_threshold() -> None:
     assert (choice.frequency_hz, choice.amplitude_percent) == (20.0, pytest.approx(25.0))
 
 
+def test_choose_prefers_a_setting_the_amplitude_steers_over_a_plateau() -> None:
+    """22 Hz: a plateau (8.1 -> 8.7 mm/s from 25 to 30 %, d ln v/d ln A about 0.4), the bracket
+    whose ends differ least; 30 Hz: 6 -> 10 mm/s over 50 -> 80 % (about 1.3). The plateau's
+    speed is set by friction, not by the amplitude: 30 Hz is chosen; with no steerable bracket
+    the plateau still is."""
+    amplitudes = [0.0, 25.0, 30.0, 50.0, 80.0]
+    plateau = [0.0, 0.0081, 0.0087, 0.0095, 0.0140]
+    even = [0.0, 0.0020, 0.0030, 0.0060, 0.0100]
+    model = TableSpeedModel([22.0, 30.0], amplitudes, [plateau, even])
+    choice = model.choose(0.0084)
+    assert choice is not None
+    assert choice.frequency_hz == 30.0
+    assert model.amplitude_sensitivity(30.0, choice.amplitude_percent) == pytest.approx(
+        (0.004 / 30.0) * choice.amplitude_percent / 0.0084
+    )
+    assert 0.5 <= model.amplitude_sensitivity(30.0, choice.amplitude_percent) <= 2.0
+    assert model.amplitude_sensitivity(22.0, 27.5) < 0.5
+    alone = TableSpeedModel([22.0], amplitudes, [plateau])
+    only = alone.choose(0.0084)
+    assert only is not None
+    assert only.amplitude_percent == pytest.approx(27.5)
+
+
 def test_amplitude_sensitivity_is_the_tables_log_slope() -> None:
     """v = c*A^0.5 sampled on the grid: the interval's slope times A/v; NaN where v <= 0."""
     amplitudes = np.array([10.0, 20.0, 40.0, 80.0])
