@@ -22,6 +22,7 @@ BENCHMARKS = [
     ("Live nodes over DDS (issue 4)", "bench_live.py"),
     ("Bag decoding and feeder analyze (issue 6)", "bench_bag.py"),
     ("Parts on request: feed_parts against continuous running (issue 34)", "bench_feed_parts.py"),
+    ("Robust design search against one-by-one evaluation (issue 32)", "bench_robust_design.py"),
 ]
 
 

@@ -68,6 +68,17 @@ def test_end_to_end_writes_the_report(tmp_path: Path, capsys: pytest.CaptureFixt
         assert type(value) is PARAMETER_SPECS[name].kind, name
     assert set(values) == set(PARAMETER_SPECS)
 
+    # the robust optimum: printed, in design.json, as parameters that load back
+    robust = record["robust"]
+    assert robust["best"]["share_lower_bound"] >= robust["probability"] == 0.95
+    assert "robust design (every condition with probability >= 0.95)" in printed
+    quantile = robust["best"]["speed_quantile_mps"]
+    assert f"speed: {1e3 * quantile:.3g} mm/s or more in 95 % of the built feeders" in printed
+    robust_params = load_parameters(out / "robust_params.yaml")
+    for name, value in robust["best"]["variables"].items():
+        assert getattr(robust_params, name) == value
+    assert quantile < optimum["speed_mps"]  # the price of holding the conditions when built
+
     with (out / "sensitivity.csv").open(newline="") as stream:
         rows = list(csv.DictReader(stream))
     assert tuple(rows[0]) == SENSITIVITY_COLUMNS
@@ -98,7 +109,11 @@ def test_min_force_and_fixed_plant_parameter(
     if record["feasible"]:
         assert record["optimum"]["speed_mps"] >= 0.003
         assert record["optimum"]["constraints"]["target_speed"] >= 0.0
-    assert "target 3 mm/s" in capsys.readouterr().out
+    printed = capsys.readouterr()
+    assert "target 3 mm/s" in printed.out
+    assert "the robust search covers max-speed" in printed.err
+    assert record["robust"] is None
+    assert not (out / "robust_params.yaml").exists()
 
 
 def test_no_design_in_set_s_exits_1(tmp_path: Path, capsys: pytest.CaptureFixture[str]) -> None:

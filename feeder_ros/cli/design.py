@@ -10,9 +10,10 @@ part, window), and printed beside the optimum.
 
 ``--output DIR`` writes ``design.json`` (everything printed, plus the convergence history),
 ``sensitivity.csv``, ``design_convergence.png``, ``design_speed_map.png`` (speed over the two
-variables it is most sensitive to) and ``optimum_params.yaml``, the optimum as the simulator's
-``ros__parameters`` (``platform_simulator --ros-args --params-file DIR/optimum_params.yaml``, or
-``feeder sim --config DIR/optimum_params.yaml``).
+variables it is most sensitive to), ``robust_params.yaml`` (the design that holds its conditions
+within the tolerances, :mod:`~feeder_ros.design.robust_search`) and ``optimum_params.yaml``, the
+optimum, each as the simulator's ``ros__parameters`` (``platform_simulator --ros-args
+--params-file DIR/optimum_params.yaml``, or ``feeder sim --config DIR/robust_params.yaml``).
 """
 
 from __future__ import annotations
@@ -33,7 +34,8 @@ from feeder_ros.design.objectives import OBJECTIVES
 # the optimizer, its report (scipy, matplotlib) and the physics core are imported where they are
 # used, so that ``feeder --help`` does not load them
 if TYPE_CHECKING:
-    from feeder_ros.design.optimizer import DesignProblem
+    from feeder_ros.design.optimizer import DesignProblem, DesignResult
+    from feeder_ros.design.robust_search import RobustResult
     from feeder_ros.design.space import DesignConfig
     from feeder_ros.physics.parameters import FeederParameters
 
@@ -141,6 +143,7 @@ def run(args: argparse.Namespace) -> int:
         population_size,
     )
     from feeder_ros.design.report import sensitivity_text, summary, write_report
+    from feeder_ros.design.robust_search import robust_text
     from feeder_ros.design.robustness import assess, robustness_text
     from feeder_ros.design.sensitivity import sensitivity_table
 
@@ -183,21 +186,36 @@ def run(args: argparse.Namespace) -> int:
         bar.close()
     rows = sensitivity_table(problem, result.params)
     built = assess(problem, result.params, design.tolerances)
+    robust = _robust(problem, result, design)
     print(summary(result, reference, plant_label, args.seed))
     print(sensitivity_text(rows))
     print(robustness_text(built, design.tolerances))
+    if robust is not None:
+        print(robust_text(robust, problem, result.speed_mps))
     for line in built.warnings:
         print(f"feeder design: warning: at the optimum, {line}", file=sys.stderr)
     if result.feasible and not built.robust:
+        instead = (
+            "; the robust design above holds its conditions (--output: robust_params.yaml)"
+            if robust is not None and robust.best is not None
+            else ""
+        )
         print(
             f"feeder design: warning: the optimum meets every condition in only "
             f"{100 * built.all_met:.0f} % of the plants within the tolerances (a robust design: "
-            f">= {100 * built.promised:g} %): it works near its nominal values only",
+            f">= {100 * built.promised:g} %): it works near its nominal values only{instead}",
             file=sys.stderr,
         )
     if args.output is not None:
         written = write_report(
-            Path(args.output), result, reference, rows, args.seed, args.map_points, built.record()
+            Path(args.output),
+            result,
+            reference,
+            rows,
+            args.seed,
+            args.map_points,
+            built.record(),
+            robust,
         )
         for path in written:
             print(f"wrote {path}")
@@ -210,6 +228,23 @@ def run(args: argparse.Namespace) -> int:
         )
         return 1
     return 0
+
+
+def _robust(
+    problem: DesignProblem, result: DesignResult, design: DesignConfig
+) -> RobustResult | None:
+    """The robust search over the nominal search's best geometries (max-speed with the drive
+    amplitude searched; else None, with a note)."""
+    from feeder_ros.design.robust_search import robust_search
+
+    if problem.objective != "max-speed" or "drive_amplitude_n" not in problem.space.names:
+        print(
+            "feeder design: note: the robust search covers max-speed with the drive amplitude "
+            "searched; this search is nominal only (see the margin report)",
+            file=sys.stderr,
+        )
+        return None
+    return robust_search(problem, result.ranked, design.tolerances)
 
 
 def _warnings(problem: DesignProblem) -> list[str]:

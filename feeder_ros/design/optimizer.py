@@ -65,6 +65,8 @@ F64 = npt.NDArray[np.float64]
 Objective = Literal["max-speed", "min-force"]
 #: track length during an evaluation: long enough that no part leaves it
 EVALUATION_TRACK_M: Final = 1.0e6
+#: feasible designs a result keeps, best first
+RANKED: Final = 64
 #: called after each evaluated batch with (designs evaluated so far, designs planned)
 ProgressCallback = Callable[[int, int], None]
 
@@ -189,6 +191,8 @@ class DesignResult:
     message: str
     #: convergence: (designs evaluated, best feasible objective so far; nan before the first)
     history: tuple[tuple[int, float], ...] = field(default=())
+    #: the feasible designs evaluated, best first (at most :data:`RANKED`): robust candidates
+    ranked: tuple[DesignEvaluation, ...] = field(default=())
 
     @property
     def params(self) -> FeederParameters:
@@ -254,6 +258,12 @@ class _Evaluator:
             if self.progress is not None:
                 self.progress(self.evaluations, self.planned)
         return [self._cache[self._key(x)] for x in vectors]
+
+    def ranked(self, count: int) -> tuple[DesignEvaluation, ...]:
+        """The ``count`` best feasible designs evaluated, best first."""
+        feasible = [entry for entry in self._cache.values() if bool(np.all(entry[1] >= 0))]
+        feasible.sort(key=lambda entry: entry[2])
+        return tuple(entry[0] for entry in feasible[:count])
 
     def constraint_fn(self, columns: F64) -> F64:
         entries = self.ensure(np.asarray(columns, dtype=np.float64))
@@ -351,6 +361,7 @@ def optimize(
         wall_time_s=wall,
         message=message,
         history=tuple(evaluator.history),
+        ranked=evaluator.ranked(RANKED),
     )
 
 

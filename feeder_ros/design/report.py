@@ -3,7 +3,8 @@ sensitivity table, and the files ``feeder design --output DIR`` writes.
 
 * ``design.json``: everything printed, plus bounds, conditions, plant and the convergence history;
 * ``sensitivity.csv``: :data:`~feeder_ros.design.sensitivity.SENSITIVITY_COLUMNS` per variable;
-* ``optimum_params.yaml``: the optimum as the simulator's ``ros__parameters``
+* ``optimum_params.yaml``: the optimum as the simulator's ``ros__parameters``, and
+  ``robust_params.yaml`` the robust optimum (:mod:`~feeder_ros.design.robust_search`) alike
   (``platform_simulator --ros-args --params-file optimum_params.yaml``, or
   ``feeder sim --config optimum_params.yaml``);
 * ``design_convergence.png`` and ``design_speed_map.png`` (speed over the two variables it is most
@@ -28,6 +29,7 @@ import yaml
 from feeder_ros.atomic_files import atomic_text
 from feeder_ros.csv_cells import csv_cell
 from feeder_ros.design.optimizer import DesignEvaluation, DesignProblem, DesignResult
+from feeder_ros.design.robust_search import RobustResult
 from feeder_ros.design.sensitivity import (
     SENSITIVITY_COLUMNS,
     SensitivityRow,
@@ -36,6 +38,7 @@ from feeder_ros.design.sensitivity import (
 )
 from feeder_ros.design.space import DesignSpace
 from feeder_ros.figures import save_figure
+from feeder_ros.physics.parameters import FeederParameters
 
 __all__ = [
     "PARAMS_FILE_NODE",
@@ -198,6 +201,7 @@ def write_report(
     seed: int,
     map_points: int,
     robustness: dict[str, object] | None = None,
+    robust: RobustResult | None = None,
 ) -> list[Path]:
     """Write the report files into ``out_dir`` (created if needed); returns their paths. The
     speed map simulates ``map_points`` x ``map_points`` designs around the optimum."""
@@ -222,6 +226,7 @@ def write_report(
         "optimum": evaluation_record(problem, result.best),
         "reference": evaluation_record(problem, reference),
         "robustness": robustness,
+        "robust": None if robust is None else robust.record(problem),
         "history": [list(item) for item in result.history],
     }
     path = out_dir / "design.json"
@@ -238,28 +243,43 @@ def write_report(
             writer.writerow([csv_cell(r.as_dict()[name]) for name in SENSITIVITY_COLUMNS])
     paths.append(path)
 
-    path = out_dir / "optimum_params.yaml"
-    with atomic_text(path) as stream:
-        stream.write(
-            f"# Optimum of `feeder design` (objective {problem.objective}, seed {seed}): "
-            "the simulator's model parameters.\n"
-            "# platform_simulator --ros-args --params-file optimum_params.yaml, or "
-            "feeder sim --config optimum_params.yaml\n"
-        )
-        yaml.safe_dump(
-            {PARAMS_FILE_NODE: {"ros__parameters": result.params.as_dict()}},
-            stream,
-            sort_keys=False,
-            default_flow_style=False,
-        )
-    paths.append(path)
+    what = f"objective {problem.objective}, seed {seed}"
+    paths.append(_write_params(out_dir / "optimum_params.yaml", result.params, f"Optimum ({what})"))
+    if robust is not None and robust.best is not None:
+        title = f"Robust optimum (probability >= {robust.probability:g}; {what})"
+        paths.append(_write_params(out_dir / "robust_params.yaml", robust.best.params, title))
 
     paths.append(plot_convergence(out_dir / "design_convergence.png", result, reference))
     ranked = sorted(rows, key=lambda r: -abs(r.speed_elasticity) if _finite(r) else 0.0)
     if len(ranked) >= 2:
-        grid = speed_map(problem, result.params, ranked[0].variable, ranked[1].variable, map_points)
+        tolerances = robust.tolerances if robust is not None else None
+        grid = speed_map(
+            problem,
+            result.params,
+            ranked[0].variable,
+            ranked[1].variable,
+            map_points,
+            tolerances,
+        )
         paths.append(plot_speed_map(out_dir / "design_speed_map.png", grid, result))
     return paths
+
+
+def _write_params(path: Path, params: FeederParameters, title: str) -> Path:
+    """A design as the simulator's ``ros__parameters`` file."""
+    with atomic_text(path) as stream:
+        stream.write(
+            f"# {title} of `feeder design`: the simulator's model parameters.\n"
+            f"# platform_simulator --ros-args --params-file {path.name}, or "
+            f"feeder sim --config {path.name}\n"
+        )
+        yaml.safe_dump(
+            {PARAMS_FILE_NODE: {"ros__parameters": params.as_dict()}},
+            stream,
+            sort_keys=False,
+            default_flow_style=False,
+        )
+    return path
 
 
 def _finite(row: SensitivityRow) -> bool:
@@ -297,6 +317,7 @@ def plot_speed_map(path: Path, grid: SpeedMap, result: DesignResult) -> Path:
     from matplotlib.backends.backend_agg import FigureCanvasAgg
     from matplotlib.colors import Normalize
     from matplotlib.figure import Figure
+    from matplotlib.patches import Patch
 
     fig = Figure(figsize=(7, 5.5), layout="constrained")
     FigureCanvasAgg(fig)
@@ -315,6 +336,22 @@ def plot_speed_map(path: Path, grid: SpeedMap, result: DesignResult) -> Path:
         norm=norm,
     )
     fig.colorbar(mesh, ax=ax, label="part speed [mm/s]")
+    extra: list[Patch] = []
+    if grid.robust is not None and grid.robust.any():
+        # hatched: designs that meet every condition in the promised share of built feeders
+        ax.contourf(
+            grid.x,
+            grid.y,
+            grid.robust.astype(float),
+            levels=[0.5, 1.5],
+            colors="none",
+            hatches=["///"],
+        )
+        if not grid.robust.all():
+            ax.contour(grid.x, grid.y, grid.robust.astype(float), levels=[0.5], colors="white")
+        extra.append(
+            Patch(facecolor="none", edgecolor="black", hatch="///", label="robust when built")
+        )
     ax.plot(
         getattr(result.params, grid.x_name),
         getattr(result.params, grid.y_name),
@@ -327,5 +364,6 @@ def plot_speed_map(path: Path, grid: SpeedMap, result: DesignResult) -> Path:
         ylabel=grid.y_name,
         title="Part speed (faded: a condition of set S or validity not met)",
     )
-    ax.legend(loc="best", fontsize="small")
+    handles = [*ax.get_legend_handles_labels()[0], *extra]
+    ax.legend(handles=handles, loc="best", fontsize="small")
     return save_figure(fig, path)

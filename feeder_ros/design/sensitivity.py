@@ -29,7 +29,8 @@ import numpy as np
 import numpy.typing as npt
 
 from feeder_ros.design.optimizer import DesignEvaluation, DesignProblem, evaluate_designs
-from feeder_ros.design.space import DesignError
+from feeder_ros.design.robust_search import robust_mask
+from feeder_ros.design.space import DesignError, Tolerances
 from feeder_ros.physics.parameters import PARAMETER_SPECS, FeederParameters, ParameterError
 
 __all__ = [
@@ -209,12 +210,22 @@ class SpeedMap:
     speed_mps: F64  # (ny, nx)
     set_s_margin: F64  # (ny, nx): min(forward, backward margin)
     feasible: npt.NDArray[np.bool_]  # (ny, nx): every constraint of the problem met
+    #: (ny, nx): every condition with the promised probability within the tolerances (None: not
+    #: computed)
+    robust: npt.NDArray[np.bool_] | None = None
 
 
 def speed_map(
-    problem: DesignProblem, params: FeederParameters, x_name: str, y_name: str, points: int = 15
+    problem: DesignProblem,
+    params: FeederParameters,
+    x_name: str,
+    y_name: str,
+    points: int = 15,
+    tolerances: Tolerances | None = None,
 ) -> SpeedMap:
-    """Evaluate ``points x points`` designs over the bounds of two variables in one batch."""
+    """Evaluate ``points x points`` designs over the bounds of two variables in one batch; with
+    ``tolerances``, also which of them are robust
+    (:func:`~feeder_ros.design.robust_search.robust_mask`)."""
     space = problem.space
     if points < 2:
         raise DesignError(f"points={points!r} must be >= 2")
@@ -248,6 +259,11 @@ def speed_map(
             [min(e.margins.forward_margin, e.margins.backward_margin) for e in evaluations]
         ).reshape(shape),
         feasible=np.array([problem.feasible(e) for e in evaluations]).reshape(shape),
+        robust=(
+            None
+            if tolerances is None
+            else robust_mask(problem, points_list, tolerances).reshape(shape)
+        ),
     )
 
 

@@ -1,0 +1,101 @@
+"""The robust design search (issue 32): the chance constraint's bound, the amplitude intervals
+homogeneity predicts against exact runs, and the robust optimum against the nominal one on fresh
+plants drawn with another seed."""
+
+from __future__ import annotations
+
+import dataclasses
+from pathlib import Path
+
+import numpy as np
+import pytest
+
+from feeder_ros.cli.sim import load_parameters
+from feeder_ros.design.optimizer import DesignProblem, DesignResult, evaluate_designs, optimize
+from feeder_ros.design.robust_search import (
+    amplitude_intervals,
+    chance_lower_bound,
+    robust_search,
+)
+from feeder_ros.design.robustness import drawn_plants
+from feeder_ros.design.space import DesignError, Tolerances, load_design_config
+from feeder_ros.design.stick_slip_conditions import condition_values
+from feeder_ros.physics.parameters import FeederParameters
+
+REPO = Path(__file__).resolve().parents[2]
+
+
+@pytest.fixture(scope="module")
+def searched() -> tuple[DesignProblem, Tolerances, DesignResult]:
+    plant = load_parameters(REPO / "config" / "platform_simulator.yaml", preset="realistic")
+    config = load_design_config(REPO / "config" / "design.yaml")
+    problem = DesignProblem(config.space, plant, config.limits, config.window)
+    return problem, config.tolerances, optimize(problem, seed=0)
+
+
+def _met(problem: DesignProblem, plants: list[FeederParameters]) -> np.ndarray:
+    evaluations = evaluate_designs(plants, problem.window, problem.part)
+    return np.array([np.all(condition_values(e.margins, problem.limits) >= 0) for e in evaluations])
+
+
+def test_the_lower_bound_of_a_share() -> None:
+    assert chance_lower_bound(64, 64) == pytest.approx(0.1 ** (1 / 64))  # 0.965
+    assert chance_lower_bound(0, 64) == 0.0
+    assert chance_lower_bound(61, 64) < 0.95 < 61 / 64  # 95 % of 64 draws is not enough
+
+
+def test_homogeneity_predicts_each_drawn_plant_at_any_amplitude(
+    searched: tuple[DesignProblem, Tolerances, DesignResult],
+) -> None:
+    """One run per drawn plant gives its amplitude interval; exact runs at three amplitudes
+    agree plant by plant."""
+    problem, tolerances, result = searched
+    small = dataclasses.replace(tolerances, samples=24)
+    lows, highs, runs = amplitude_intervals(problem, result.params, small)
+    assert runs == 24
+    for scale in (0.5, 0.8, 1.0):
+        amplitude = scale * result.params.drive_amplitude_n
+        params = result.params.with_changes(drive_amplitude_n=amplitude)
+        exact = _met(problem, drawn_plants(params, small))
+        predicted = (lows <= amplitude) & (amplitude <= highs)
+        assert np.array_equal(exact, predicted), (scale, exact, predicted)
+    assert (
+        0
+        < np.sum(
+            (lows <= result.params.drive_amplitude_n) & (result.params.drive_amplitude_n <= highs)
+        )
+        < 24
+    )
+
+
+def test_the_robust_optimum_holds_on_fresh_plants_and_the_nominal_does_not(
+    searched: tuple[DesignProblem, Tolerances, DesignResult],
+) -> None:
+    problem, tolerances, result = searched
+    found = robust_search(problem, result.ranked, tolerances)
+    assert found.best is not None
+    best = found.best
+    assert best.lower_bound >= tolerances.probability
+    assert best.speed_quantile_mps == pytest.approx(np.quantile(best.speeds_mps, 0.05))
+    assert best.speed_quantile_mps == max(c.speed_quantile_mps for c in found.candidates)
+    # the same search again: the same design (seeded draws, exact solver)
+    assert robust_search(problem, result.ranked, tolerances).best.params == best.params  # type: ignore[union-attr]
+    fresh = dataclasses.replace(tolerances, samples=200, seed=99)
+    robust_share = _met(problem, drawn_plants(best.params, fresh)).mean()
+    nominal_share = _met(problem, drawn_plants(result.params, fresh)).mean()
+    assert robust_share >= tolerances.probability, robust_share
+    assert nominal_share < 0.8, nominal_share
+    speeds = [
+        e.speed_mps for e in evaluate_designs(drawn_plants(best.params, fresh), problem.window)
+    ]
+    assert np.quantile(speeds, 0.05) > 0.9 * best.speed_quantile_mps  # the speed holds too
+    assert best.speed_quantile_mps > 0.003  # and it still feeds: 3 mm/s for 95 % of the feeders
+
+
+def test_the_robust_search_refuses_what_it_does_not_cover(
+    searched: tuple[DesignProblem, Tolerances, DesignResult],
+) -> None:
+    problem, tolerances, result = searched
+    min_force = dataclasses.replace(problem, objective="min-force", target_speed_mps=0.01)
+    with pytest.raises(DesignError, match="robust search optimises max-speed"):
+        robust_search(min_force, result.ranked, tolerances)
