@@ -175,3 +175,13 @@ def drive_node(
         )
         assert visible, process.poll()
         yield cell
+
+
+def small_speed_table(cache_dir: Path) -> tuple[str, ...]:
+    """Parameters for a coarse physics speed table, cached in ``cache_dir`` (fast to build)."""
+    return (
+        f"speed_model_cache_dir:={cache_dir}",
+        "speed_model_frequency_steps:=12",
+        "speed_model_amplitude_steps:=6",
+        "speed_model_duration_s:=1.0",
+    )

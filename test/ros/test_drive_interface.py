@@ -20,7 +20,7 @@ from diagnostic_msgs.msg import DiagnosticStatus
 from lifecycle_msgs.msg import Transition
 from rcl_interfaces.msg import Log, ParameterType, ParameterValue
 from rcl_interfaces.srv import GetParameters
-from ros_drive_cell import NODE, RELIABLE, SIMULATOR, drive_node, stamp_s
+from ros_drive_cell import NODE, RELIABLE, SIMULATOR, drive_node, small_speed_table, stamp_s
 from ros_test_tools import call, running, wait_until
 from std_srvs.srv import Trigger
 
@@ -432,10 +432,7 @@ def test_watchdog_trips_within_its_timeout_and_ramps_to_zero() -> None:
 def test_target_speed_mode_drives_the_platform_simulator(tmp_path: Path) -> None:
     ns = "/drive_speed"
     params = (
-        f"speed_model_cache_dir:={tmp_path}",
-        "speed_model_frequency_steps:=12",
-        "speed_model_amplitude_steps:=6",
-        "speed_model_duration_s:=1.0",
+        *small_speed_table(tmp_path),
         "min_frequency_hz:=10.0",
         "max_frequency_hz:=60.0",
         "max_amplitude_rate_percent_per_s:=100.0",

@@ -8,7 +8,7 @@ import time
 from pathlib import Path
 
 from rclpy.qos import DurabilityPolicy, QoSProfile, ReliabilityPolicy
-from ros_drive_cell import drive_node
+from ros_drive_cell import drive_node, small_speed_table
 from ros_test_tools import wait_until
 
 from feeder_ros.msg import DriveState, PartCalibration, VehicleEstimate
@@ -46,10 +46,7 @@ def _calibration(transits: int, stamp: object) -> PartCalibration:
 def test_the_trim_holds_each_setting_until_a_transit_of_it_is_used(tmp_path: Path) -> None:
     ns = "/drive_trim_hold"
     params = (
-        f"speed_model_cache_dir:={tmp_path}",
-        "speed_model_frequency_steps:=12",
-        "speed_model_amplitude_steps:=6",
-        "speed_model_duration_s:=1.0",
+        *small_speed_table(tmp_path),
         "max_amplitude_rate_percent_per_s:=100.0",
         "max_frequency_rate_hz_per_s:=100.0",
         "sim_feedback_timeout_s:=0.0",
