@@ -15,7 +15,10 @@ from feeder_ros.design.sensitivity import SENSITIVITY_COLUMNS
 from feeder_ros.design.space import DESIGN_VARIABLES
 from feeder_ros.physics.parameters import PARAMETER_SPECS, FeederParameters
 
-SMALL = ["--seed", "3", "--population", "14", "--generations", "4", "--map-points", "4"]
+SMALL = [
+    "--seed", "3", "--population", "14", "--generations", "4", "--map-points", "4",
+    "--robust-generations", "2",
+]  # fmt: skip
 
 
 def test_end_to_end_writes_the_report(tmp_path: Path, capsys: pytest.CaptureFixture[str]) -> None:

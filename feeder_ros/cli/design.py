@@ -101,6 +101,14 @@ def add_arguments(parser: argparse.ArgumentParser) -> None:
         help="designs simulated at most (caps --generations)",
     )
     parser.add_argument(
+        "--robust-generations",
+        type=non_negative_int,
+        default=10,
+        metavar="N",
+        help="generations of the robust search's evolution, 0: derate the nominal search's best "
+        "designs only (default 10)",
+    )
+    parser.add_argument(
         "--map-points",
         type=int_at_least(2),
         default=15,
@@ -186,7 +194,7 @@ def run(args: argparse.Namespace) -> int:
         bar.close()
     rows = sensitivity_table(problem, result.params)
     built = assess(problem, result.params, design.tolerances)
-    robust = _robust(problem, result, design)
+    robust = _robust(problem, result, design, args.robust_generations, args.seed)
     print(summary(result, reference, plant_label, args.seed))
     print(sensitivity_text(rows))
     print(robustness_text(built, design.tolerances))
@@ -231,9 +239,13 @@ def run(args: argparse.Namespace) -> int:
 
 
 def _robust(
-    problem: DesignProblem, result: DesignResult, design: DesignConfig
+    problem: DesignProblem,
+    result: DesignResult,
+    design: DesignConfig,
+    generations: int,
+    seed: int,
 ) -> RobustResult | None:
-    """The robust search over the nominal search's best geometries (max-speed with the drive
+    """The robust search from the nominal search's best geometries (max-speed with the drive
     amplitude searched; else None, with a note)."""
     from feeder_ros.design.robust_search import robust_search
 
@@ -244,7 +256,9 @@ def _robust(
             file=sys.stderr,
         )
         return None
-    return robust_search(problem, result.ranked, design.tolerances)
+    return robust_search(
+        problem, result.ranked, design.tolerances, generations=generations, seed=seed
+    )
 
 
 def _warnings(problem: DesignProblem) -> list[str]:

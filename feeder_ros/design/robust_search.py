@@ -20,9 +20,15 @@ force), such a design misses a condition in about half the plants. This search a
   The largest amplitude meeting the chance constraint is then evaluated once more, all draws in
   one parallel batch, for the speeds. Per candidate geometry: one margins batch and one speed
   batch, where amplitude by amplitude and draw by draw would take a run for each pair.
-* **Candidates.** The geometries the nominal search found best (its ranked feasible designs,
-  distinct apart from the amplitude), each derated to its own robust amplitude; the best
-  quantile wins. The search is deterministic: the draws are seeded, the solver exact.
+* **Candidates, then evolution.** The geometries the nominal search found best (its ranked
+  feasible designs, distinct apart from the amplitude), each derated to its own robust
+  amplitude, start a differential evolution of the robust objective over the geometry (every
+  variable but the amplitude, which homogeneity settles): a geometry that meets the chance
+  constraint scores minus its speed quantile, one that does not scores by how far its best
+  share falls short, so the evolution climbs back to robust designs. The best quantile found
+  wins. On the default space 10 generations raise it from 7.6 to 8.9 mm/s in about 20 s; 20
+  add nothing. The search is deterministic: the draws and the evolution are seeded, the
+  solver exact.
 """
 
 from __future__ import annotations
@@ -31,9 +37,11 @@ import math
 import time
 from collections.abc import Sequence
 from dataclasses import dataclass
+from typing import Any, cast
 
 import numpy as np
 import numpy.typing as npt
+from scipy.optimize import Bounds, differential_evolution
 from scipy.stats import beta
 
 from feeder_ros.design.optimizer import DesignEvaluation, DesignProblem, evaluate_designs
@@ -149,6 +157,7 @@ class RobustResult:
     best: RobustCandidate | None  #: None: no candidate meets the chance constraint
     candidates: tuple[RobustCandidate, ...]
     tolerances: Tolerances
+    geometries: int  #: geometries measured (each: margins of every draw, then speeds if robust)
     runs: int  #: exact runs (margins and speeds)
     wall_time_s: float
     message: str
@@ -227,14 +236,88 @@ def _distinct_geometries(
     return chosen
 
 
+def _measure(
+    problem: DesignProblem, geometries: Sequence[FeederParameters], tolerances: Tolerances
+) -> tuple[list[RobustCandidate | float], int]:
+    """Each geometry at its robust amplitude (a candidate), or, where no amplitude meets the
+    chance constraint, the largest share of the draws any amplitude meets; and the exact runs."""
+    p, samples = tolerances.probability, tolerances.samples
+    runs = 0
+    outcomes: list[RobustCandidate | float] = []
+    derated: list[tuple[int, FeederParameters, int]] = []
+    for k, params in enumerate(geometries):
+        lows, highs, count = amplitude_intervals(problem, params, tolerances)
+        runs += count
+        found = _robust_amplitude(problem, lows, highs, p)
+        if found is None:
+            ends = highs[np.isfinite(highs)]
+            outcomes.append(
+                max((float(np.mean((lows <= a) & (a <= highs))) for a in ends), default=0.0)
+            )
+        else:
+            outcomes.append(0.0)  # replaced below
+            derated.append((k, params.with_changes(drive_amplitude_n=found[0]), found[1]))
+    plants = [plant for _, params, _ in derated for plant in drawn_plants(params, tolerances)]
+    evaluations = evaluate_designs(plants, problem.window, problem.part)
+    speeds = np.array([e.speed_mps for e in evaluations], np.float64)
+    runs += len(plants)
+    for j, (k, params, met) in enumerate(derated):
+        own = speeds[j * samples : (j + 1) * samples]
+        finite = own[np.isfinite(own)]
+        quantile = float(np.quantile(finite, 1.0 - p)) if finite.size == own.size else -math.inf
+        outcomes[k] = RobustCandidate(
+            params, met / samples, chance_lower_bound(met, samples), own, quantile
+        )
+    return outcomes, runs
+
+
+class _Evolution:
+    """The robust objective over the geometry (every variable but the amplitude) for
+    :func:`scipy.optimize.differential_evolution`, vectorised: a population at a time."""
+
+    def __init__(self, problem: DesignProblem, tolerances: Tolerances, reference: FeederParameters):
+        self.problem, self.tolerances, self.reference = problem, tolerances, reference
+        self.column = problem.space.names.index("drive_amplitude_n")
+        self.runs = 0
+        self.found: list[RobustCandidate] = []
+        self.values: dict[bytes, float] = {}  # by geometry: each measured once
+
+    def geometry(self, params: FeederParameters) -> F64:
+        return np.delete(self.problem.space.vector(params), self.column)
+
+    def params(self, geometry: F64) -> FeederParameters:
+        vector = np.insert(geometry, self.column, self.reference.drive_amplitude_n)
+        return self.problem.space.to_parameters(vector, self.problem.plant)
+
+    def __call__(self, columns: F64) -> F64:
+        population = np.atleast_2d(np.asarray(columns, np.float64).T)
+        keys = [x.tobytes() for x in population]
+        new = {key: x for key, x in zip(keys, population, strict=True) if key not in self.values}
+        outcomes, runs = _measure(
+            self.problem, [self.params(x) for x in new.values()], self.tolerances
+        )
+        self.runs += runs
+        for key, outcome in zip(new, outcomes, strict=True):
+            if isinstance(outcome, RobustCandidate):
+                self.found.append(outcome)
+                self.values[key] = -outcome.speed_quantile_mps  # m/s: < 0 beats every miss
+            else:
+                self.values[key] = 1.0 + (1.0 - outcome)  # the closer to holding, the better
+        return np.array([self.values[key] for key in keys])
+
+
 def robust_search(
     problem: DesignProblem,
     ranked: Sequence[DesignEvaluation],
     tolerances: Tolerances,
     candidates: int = 32,
+    generations: int = 0,
+    seed: int = 0,
 ) -> RobustResult:
-    """The robust optimum among the ``candidates`` best distinct geometries of ``ranked`` (the
-    nominal search's feasible designs, best first); see the module docstring."""
+    """The robust optimum: the ``candidates`` best distinct geometries of ``ranked`` (the
+    nominal search's feasible designs, best first) derated; with ``generations``, a
+    differential evolution of the robust objective over the geometry that starts from them
+    (seeded). See the module docstring."""
     if problem.objective != "max-speed":
         raise DesignError(
             f"the robust search optimises max-speed; objective {problem.objective!r} is "
@@ -245,32 +328,39 @@ def robust_search(
             "the robust search derates the drive amplitude: variables.drive_amplitude_n is missing"
         )
     started = time.perf_counter()
-    p = tolerances.probability
-    runs = 0
-    derated: list[tuple[FeederParameters, int]] = []
-    for params in _distinct_geometries(problem, ranked, candidates):
-        lows, highs, count = amplitude_intervals(problem, params, tolerances)
-        runs += count
-        found = _robust_amplitude(problem, lows, highs, p)
-        if found is not None:
-            derated.append((params.with_changes(drive_amplitude_n=found[0]), found[1]))
-    plants = [plant for params, _ in derated for plant in drawn_plants(params, tolerances)]
-    speeds = np.array([e.speed_mps for e in evaluate_designs(plants, problem.window, problem.part)])
-    runs += len(plants)
-    samples = tolerances.samples
-    results = []
-    for k, (params, met) in enumerate(derated):
-        own = speeds[k * samples : (k + 1) * samples]
-        finite = own[np.isfinite(own)]
-        quantile = float(np.quantile(finite, 1.0 - p)) if finite.size == own.size else -math.inf
-        results.append(
-            RobustCandidate(params, met / samples, chance_lower_bound(met, samples), own, quantile)
+    p, samples = tolerances.probability, tolerances.samples
+    geometries = _distinct_geometries(problem, ranked, candidates)
+    if not geometries:
+        return RobustResult(
+            None, (), tolerances, 0, 0, 0.0, "no feasible nominal design to start from"
         )
-    best = max(results, key=lambda c: c.speed_quantile_mps, default=None)
+    evolution = _Evolution(problem, tolerances, geometries[0])
+    start = np.array([evolution.geometry(g) for g in geometries])
+    evolution(start.T)
+    if generations > 0 and len(geometries) >= 5:
+        space = problem.space
+        keep = np.arange(space.size) != evolution.column
+        differential_evolution(
+            cast(Any, evolution),
+            Bounds(space.lower[keep], space.upper[keep]),
+            maxiter=generations,
+            init=start,
+            rng=np.random.default_rng(seed),
+            polish=False,
+            updating="deferred",
+            vectorized=True,
+            integrality=space.integrality[keep],
+        )
+    found = tuple(evolution.found)
+    best = max(found, key=lambda c: c.speed_quantile_mps, default=None)
     wall = time.perf_counter() - started
+    evolved = f", {generations} generations of evolution" if generations > 0 else ""
     message = (
-        f"{len(results)} of {len(_distinct_geometries(problem, ranked, candidates))} candidate "
-        f"geometries meet every condition with probability >= {p:g} ({100 * CONFIDENCE:g} % "
-        f"lower bound over {samples} drawn plants); {runs} exact runs in {wall:.1f} s"
+        f"{len(found)} designs meet every condition with probability >= {p:g} "
+        f"({100 * CONFIDENCE:g} % lower bound over {samples} drawn plants), from "
+        f"{len(geometries)} nominal candidates{evolved}; {evolution.runs} exact runs in "
+        f"{wall:.1f} s"
     )
-    return RobustResult(best, tuple(results), tolerances, runs, wall, message)
+    return RobustResult(
+        best, found, tolerances, len(evolution.values), evolution.runs, wall, message
+    )

@@ -92,6 +92,21 @@ def test_the_robust_optimum_holds_on_fresh_plants_and_the_nominal_does_not(
     assert best.speed_quantile_mps > 0.003  # and it still feeds: 3 mm/s for 95 % of the feeders
 
 
+def test_the_evolution_finds_a_faster_robust_design_that_still_holds(
+    searched: tuple[DesignProblem, Tolerances, DesignResult],
+) -> None:
+    problem, tolerances, result = searched
+    derated = robust_search(problem, result.ranked, tolerances)
+    evolved = robust_search(problem, result.ranked, tolerances, generations=4, seed=0)
+    assert derated.best is not None
+    assert evolved.best is not None
+    assert evolved.geometries > derated.geometries == 32
+    assert evolved.best.speed_quantile_mps > derated.best.speed_quantile_mps
+    assert evolved.best.lower_bound >= tolerances.probability
+    fresh = dataclasses.replace(tolerances, samples=200, seed=99)
+    assert _met(problem, drawn_plants(evolved.best.params, fresh)).mean() >= 0.95
+
+
 def test_the_robust_search_refuses_what_it_does_not_cover(
     searched: tuple[DesignProblem, Tolerances, DesignResult],
 ) -> None:
