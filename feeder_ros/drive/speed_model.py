@@ -108,15 +108,21 @@ class TableSpeedModel:
     def amplitude_sensitivity(self, frequency_hz: float, amplitude_percent: float) -> float:
         """The relative change of the predicted speed per relative change of the amplitude,
         ``d ln v / d ln A``, at a tabulated frequency (the nearest row): the slope of the
-        amplitude interval holding ``amplitude_percent`` (the table is linear inside it).
-        NaN where the speed is not positive or the slope not finite."""
+        amplitude interval holding ``amplitude_percent`` (the table is linear inside it); on an
+        inner grid point, of the two intervals around it. NaN where the speed or the slope is
+        not positive (a falling speed: the table cannot say which way to step)."""
         row = int(np.argmin(np.abs(self.frequencies_hz - frequency_hz)))
         a, v = self.amplitudes_percent, self.speeds_mps[row]
         j = int(np.clip(np.searchsorted(a, amplitude_percent) - 1, 0, a.size - 2))
+        lower, upper = j, j + 1
+        on_grid = np.isclose(a, amplitude_percent, rtol=0.0, atol=1e-9)
+        if on_grid.any():
+            k = int(np.argmax(on_grid))
+            lower, upper = max(k - 1, 0), min(k + 1, a.size - 1)
         speed = float(np.interp(amplitude_percent, a, v))
-        slope = float((v[j + 1] - v[j]) / (a[j + 1] - a[j]))
+        slope = float((v[upper] - v[lower]) / (a[upper] - a[lower]))
         value = slope * amplitude_percent / speed if speed > 0.0 else math.nan
-        return value if math.isfinite(value) else math.nan
+        return value if math.isfinite(value) and value > 0.0 else math.nan
 
     def choose(self, speed_mps: float, frequency_hz: float | None = None) -> SpeedChoice | None:
         """See the class docstring; with ``frequency_hz``, at that tabulated frequency only (the

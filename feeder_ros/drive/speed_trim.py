@@ -107,7 +107,8 @@ class SpeedTrim:
         sensitivity: float = 1.0,
     ) -> float | None:
         """The trimmed amplitude for this reading, or None (not counted, or no step needed).
-        ``sensitivity``: ``d ln v / d ln A`` at the set point (NaN: unknown, taken as 1)."""
+        ``sensitivity``: ``d ln v / d ln A`` at the set point (NaN or not positive: unknown,
+        taken as 1)."""
         cfg = self.settings
         if not (math.isfinite(target_mps) and target_mps != 0.0):
             self.last_note = "no target"
@@ -135,7 +136,8 @@ class SpeedTrim:
             )
             return None
         low, high = SENSITIVITY_RANGE
-        slope = min(max(sensitivity, low), high) if math.isfinite(sensitivity) else 1.0
+        known = math.isfinite(sensitivity) and sensitivity > 0.0
+        slope = min(max(sensitivity, low), high) if known else 1.0
         # never a step to a negative amplitude (max_step may exceed 1): at most down to zero
         step = max(-min(cfg.max_step, 1.0), min(cfg.max_step, cfg.gain * error / slope))
         self.steps += 1

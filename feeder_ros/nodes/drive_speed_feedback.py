@@ -31,7 +31,7 @@ from rclpy.node import Node
 from rclpy.qos import DurabilityPolicy, QoSProfile, ReliabilityPolicy
 
 from feeder_ros.drive.controller import DriveController
-from feeder_ros.drive.speed_model import SpeedModel, TableSpeedModel
+from feeder_ros.drive.speed_model import STEERABLE, SpeedModel, TableSpeedModel
 from feeder_ros.drive.speed_trim import SpeedTrim, TrimSettings
 from feeder_ros.msg import PartCalibration, VehicleEstimate
 from feeder_ros.physics.parameters import FeederParameters, ParameterError
@@ -75,7 +75,7 @@ class SpeedFeedback:
         self._table_plant: FeederParameters | None = None  # the one the table was built for
         self._trim = SpeedTrim(trim_settings_from(values))
         self._seen_point: tuple[float, float, bool, float] | None = None
-        self._transits_used = 0  # as the last calibration message said
+        self._transits_used: int | None = None  # as the last calibration message said
         self.calibration_note = "not configured"
         # the table rebuild runs in a worker thread: what it builds, what it built, what next
         self._build_lock = threading.Lock()
@@ -97,7 +97,7 @@ class SpeedFeedback:
         self._rebuild = rebuild
         self._trim = SpeedTrim(trim_settings_from(self._values))
         self._seen_point = None
-        self._transits_used = 0
+        self._transits_used = None
         node = self._node
         topic = self._values["calibration_topic"]
         if rebuild is not None and topic:
@@ -202,9 +202,11 @@ class SpeedFeedback:
     def _on_calibration(self, message: PartCalibration) -> None:
         stamp = message.header.stamp
         used = int(message.transits_used)
-        if used > self._transits_used:
+        # the first message is the baseline (a calibration restored from its file counts the
+        # transits of earlier runs); a transit is used when the count rises (fewer: a reset)
+        if self._transits_used is not None and used > self._transits_used:
             self._trim.transit_used(float(stamp.sec) + float(stamp.nanosec) * 1e-9)
-        self._transits_used = used  # (fewer: a reset)
+        self._transits_used = used
         controller, plant, rebuild = self._controller, self._plant, self._rebuild
         if controller is None or plant is None or rebuild is None:
             return
@@ -281,17 +283,24 @@ class SpeedFeedback:
         if controller.speed_mode and math.isfinite(controller.target_speed_mps):
             trimmed = controller.set_point
             if isinstance(model, TableSpeedModel):
-                keep = model.choose(controller.target_speed_mps, trimmed.frequency_hz) is not None
+                here = model.choose(controller.target_speed_mps, trimmed.frequency_hz)
+                low, high = STEERABLE
+                keep = here is not None and (
+                    low
+                    <= model.amplitude_sensitivity(here.frequency_hz, here.amplitude_percent)
+                    <= high
+                )
             else:
                 choice = model.choose(controller.target_speed_mps)
                 keep = choice is not None and math.isclose(
                     choice.frequency_hz, trimmed.frequency_hz
                 )
             if keep:
-                # the frequency in use still reaches the target: the trim's amplitude holds it
-                # on the real feeder. A new choice would throw that work away, and a frequency
-                # hop on every small recalibration (seen in the demo: 30 -> 22 -> 30 Hz within
-                # 20 s) is a new operating point each time, its transits voided.
+                # the frequency in use still reaches the target where the amplitude steers the
+                # speed: the trim's amplitude holds it on the real feeder. A new choice would
+                # throw that work away, and a frequency hop on every small recalibration (seen
+                # in the demo: 30 -> 22 -> 30 Hz within 20 s) is a new operating point each
+                # time, its transits voided.
                 return
             answer = controller.set_target_speed(
                 now, controller.target_speed_mps, controller.set_ramp_time_s

@@ -76,8 +76,11 @@ def test_the_robust_optimum_holds_on_fresh_plants_and_the_nominal_does_not(
     assert found.best is not None
     best = found.best
     assert best.lower_bound >= tolerances.probability
-    assert best.speed_quantile_mps == pytest.approx(np.quantile(best.speeds_mps, 0.05))
-    assert best.speed_quantile_mps == max(c.speed_quantile_mps for c in found.candidates)
+    # a drawn speed that 95 % of the draws reach or exceed
+    assert best.speed_quantile_mps in best.speeds_mps
+    assert np.mean(best.speeds_mps >= best.speed_quantile_mps) >= 0.95
+    assert all(c.lower_bound >= tolerances.probability for c in found.candidates)
+    assert len(found.candidates) >= 2
     # the same search again: the same design (seeded draws, exact solver)
     assert robust_search(problem, result.ranked, tolerances).best.params == best.params  # type: ignore[union-attr]
     fresh = dataclasses.replace(tolerances, samples=200, seed=99)
@@ -105,6 +108,28 @@ def test_the_evolution_finds_a_faster_robust_design_that_still_holds(
     assert evolved.best.lower_bound >= tolerances.probability
     fresh = dataclasses.replace(tolerances, samples=200, seed=99)
     assert _met(problem, drawn_plants(evolved.best.params, fresh)).mean() >= 0.95
+
+
+def test_an_absolute_force_tolerance_and_a_zero_force_design(
+    searched: tuple[DesignProblem, Tolerances, DesignResult],
+) -> None:
+    """An absolute force scatter shifts each draw's interval (checked against exact runs); a
+    design at 0 N is run at 1 N for its intervals and meets nothing there."""
+    problem, tolerances, result = searched
+    relative = {k: v for k, v in tolerances.relative.items() if k != "drive_amplitude_n"}
+    absolute = {**tolerances.absolute, "drive_amplitude_n": 0.5}
+    shifted = Tolerances(relative, absolute, samples=16, seed=3)
+    lows, highs, _ = amplitude_intervals(problem, result.params, shifted)
+    for scale in (0.6, 0.9):
+        amplitude = scale * result.params.drive_amplitude_n
+        params = result.params.with_changes(drive_amplitude_n=amplitude)
+        exact = _met(problem, drawn_plants(params, shifted))
+        assert np.array_equal(exact, (lows <= amplitude) & (amplitude <= highs)), scale
+    zero = result.params.with_changes(drive_amplitude_n=0.0)
+    lows, highs, runs = amplitude_intervals(problem, zero, shifted)
+    assert runs == 16
+    assert not np.any((lows <= 0.0) & (highs >= 0.0))
+    assert np.all(lows > 0.0)
 
 
 def test_the_robust_search_refuses_what_it_does_not_cover(

@@ -56,7 +56,7 @@ def test_choose_avoids_the_steep_slip_threshold() -> None:
 
 def test_choose_prefers_a_setting_the_amplitude_steers_over_a_plateau() -> None:
     """22 Hz: a plateau (8.1 -> 8.7 mm/s from 25 to 30 %, d ln v/d ln A about 0.4), the bracket
-    whose ends differ least; 30 Hz: 6 -> 10 mm/s over 50 -> 80 % (about 1.3). The plateau's
+    whose ends differ least; 30 Hz: 6 -> 10 mm/s over 50 -> 80 % (1.08 at 8.4 mm/s). The plateau's
     speed is set by friction, not by the amplitude: 30 Hz is chosen; with no steerable bracket
     the plateau still is."""
     amplitudes = [0.0, 25.0, 30.0, 50.0, 80.0]
@@ -78,7 +78,8 @@ def test_choose_prefers_a_setting_the_amplitude_steers_over_a_plateau() -> None:
 
 
 def test_amplitude_sensitivity_is_the_tables_log_slope() -> None:
-    """v = c*A^0.5 sampled on the grid: the interval's slope times A/v; NaN where v <= 0."""
+    """A piecewise linear row: the interval's slope times A/v, the two intervals' on an inner
+    grid point; NaN where v <= 0 or the speed falls."""
     amplitudes = np.array([10.0, 20.0, 40.0, 80.0])
     model = TableSpeedModel([30.0], amplitudes, [[-0.001, 0.0, 0.002, 0.004]])
     # 40..80 %: slope 0.002/40 per %, at 60 % v = 0.003: 0.05e-3 * 60 / 0.003 = 1
@@ -86,6 +87,10 @@ def test_amplitude_sensitivity_is_the_tables_log_slope() -> None:
     assert model.amplitude_sensitivity(31.0, 30.0) == pytest.approx(1e-4 * 30.0 / 0.001)
     assert np.isnan(model.amplitude_sensitivity(30.0, 15.0))  # v = -0.0005 there
     assert np.isnan(model.amplitude_sensitivity(30.0, 20.0))  # v = 0
+    # on the grid point 40 %: the slope from 20 to 80 %, 0.004/60 per %, times 40/0.002
+    assert model.amplitude_sensitivity(30.0, 40.0) == pytest.approx(0.004 / 60.0 * 40.0 / 0.002)
+    falling = TableSpeedModel([30.0], [0.0, 50.0, 100.0], [[0.0, 0.006, 0.004]])
+    assert np.isnan(falling.amplitude_sensitivity(30.0, 75.0))
 
 
 def test_choose_at_one_frequency_searches_that_row_only() -> None:

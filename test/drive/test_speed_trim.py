@@ -59,6 +59,8 @@ def test_the_step_divides_by_the_speed_models_sensitivity_held_in_its_range() ->
         )
     trim.setting_changed(7.0)
     assert trim.reading(9.0, 1.0, 0.009, 1e-5, TARGET, 40.0, math.nan) == pytest.approx(42.0)
+    trim.setting_changed(10.0)  # a falling table: unknown, not a larger step the wrong way
+    assert trim.reading(12.0, 1.0, 0.009, 1e-5, TARGET, 40.0, -0.26) == pytest.approx(42.0)
 
 
 def _steps_to_target(gain: float, sensitivity: float) -> int:
