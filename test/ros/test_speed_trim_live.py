@@ -1,5 +1,6 @@
 """The drive interface's speed trim on the wire: it reads the estimator's calibration and holds
-each setting for a sensor transit before it steps again (the probe plays the estimator)."""
+each setting for a sensor transit before it steps again, once the transit count has risen past
+the first message's (the probe plays the estimator)."""
 
 from __future__ import annotations
 
@@ -63,8 +64,11 @@ def test_the_trim_holds_each_setting_until_a_transit_of_it_is_used(tmp_path: Pat
         target = 0.5 * float(refused.reason.rsplit("..", 1)[1].split()[0])
         answer = cell.set_speed(target)
         assert answer.result == SetTargetSpeed.Response.ACCEPTED, answer.reason
-        # a transit used before the start: this cell times transits
-        calibration.publish(_calibration(1, probe.get_clock().now().to_msg()))
+        # the first message is the drive's baseline (a restored calibration counts the transits
+        # of earlier runs); then a transit used before the start: this cell times transits
+        calibration.publish(_calibration(3, probe.get_clock().now().to_msg()))
+        time.sleep(0.5)
+        calibration.publish(_calibration(4, probe.get_clock().now().to_msg()))
         time.sleep(0.5)
 
         def estimate() -> None:  # a trusted estimate 10 % slow, whatever the setting
@@ -104,7 +108,7 @@ def test_the_trim_holds_each_setting_until_a_transit_of_it_is_used(tmp_path: Pat
         second = cell.last_state()
         assert second is not None
         time.sleep(0.5)  # the new setting reached (a step of <= 15 % at 100 %/s)
-        calibration.publish(_calibration(2, probe.get_clock().now().to_msg()))
+        calibration.publish(_calibration(5, probe.get_clock().now().to_msg()))
         t_transit = cell.now_s()
         assert wait_until(lambda: stepped_from(second.target_amplitude_percent), HOLD_S + 4.0)
         assert cell.now_s() - t_transit < HOLD_S - 2.0, cell.now_s() - t_transit
