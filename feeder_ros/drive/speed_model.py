@@ -33,12 +33,19 @@ __all__ = [
     "cached_speed_table",
     "compute_speed_table",
     "default_cache_dir",
+    "steerable",
 ]
 
 F64 = npt.NDArray[np.float64]
 TABLE_VERSION = 1  # bump when the table's meaning changes: old cache files are then ignored
 #: sensitivities d ln v / d ln A at which the amplitude steers the speed (choice of a set point)
 STEERABLE = (0.5, 2.0)
+
+
+def steerable(sensitivity: float) -> bool:
+    """Whether the amplitude steers the speed at this ``d ln v / d ln A`` (NaN: no)."""
+    low, high = STEERABLE
+    return bool(low <= sensitivity <= high)
 
 
 @dataclass(frozen=True)
@@ -146,9 +153,7 @@ class TableSpeedModel:
                 amplitude = float(a[j] + fraction * (a[j + 1] - a[j]))
                 slope = (v1 - v0) / (a[j + 1] - a[j])
                 sensitivity = slope * amplitude / speed_mps if speed_mps > 0.0 else math.nan
-                low, high = STEERABLE
-                steerable = bool(low <= sensitivity <= high)
-                key = (float(not steerable), float(abs(v1 - v0)), amplitude)
+                key = (float(not steerable(sensitivity)), float(abs(v1 - v0)), amplitude)
                 if key < best_key:
                     best_key = key
                     best = SpeedChoice(float(frequency), amplitude, float(speed_mps))

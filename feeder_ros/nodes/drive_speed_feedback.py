@@ -31,7 +31,7 @@ from rclpy.node import Node
 from rclpy.qos import DurabilityPolicy, QoSProfile, ReliabilityPolicy
 
 from feeder_ros.drive.controller import DriveController
-from feeder_ros.drive.speed_model import STEERABLE, SpeedModel, TableSpeedModel
+from feeder_ros.drive.speed_model import SpeedModel, TableSpeedModel, steerable
 from feeder_ros.drive.speed_trim import SpeedTrim, TrimSettings
 from feeder_ros.msg import PartCalibration, VehicleEstimate
 from feeder_ros.physics.parameters import FeederParameters, ParameterError
@@ -284,11 +284,8 @@ class SpeedFeedback:
             trimmed = controller.set_point
             if isinstance(model, TableSpeedModel):
                 here = model.choose(controller.target_speed_mps, trimmed.frequency_hz)
-                low, high = STEERABLE
-                keep = here is not None and (
-                    low
-                    <= model.amplitude_sensitivity(here.frequency_hz, here.amplitude_percent)
-                    <= high
+                keep = here is not None and steerable(
+                    model.amplitude_sensitivity(here.frequency_hz, here.amplitude_percent)
                 )
             else:
                 choice = model.choose(controller.target_speed_mps)
