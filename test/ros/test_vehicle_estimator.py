@@ -28,7 +28,7 @@ from rclpy.serialization import serialize_message
 from ros_test_tools import call, probe_node, running, wait_until
 from sensor_msgs.msg import Imu
 
-from feeder_ros.msg import DriveCommand, PartStateArray, VehicleEstimate
+from feeder_ros.msg import CarrierState, DriveCommand, PartStateArray, VehicleEstimate
 from feeder_ros.nodes.vehicle_estimator import DEFAULTS, _build_estimator, imu_sample
 
 BIN = Path(sys.executable).parent
@@ -103,10 +103,25 @@ def test_namespaced_feeders_side_by_side_estimate_their_own_true_speed() -> None
         estimates: dict[str, list[VehicleEstimate]] = {ns: [] for ns in feeders}
         parts: dict[str, list[PartStateArray]] = {ns: [] for ns in feeders}
         diagnostics: list[DiagnosticArray] = []
+        driven_from = dict.fromkeys(feeders, math.inf)  # first carrier state under the drive
+
+        def note_drive(ns: str, state: CarrierState) -> None:
+            # the estimator may hear the drive before the simulator does (discovery order): until
+            # the simulator applies it the carrier rests and the part with it (an estimate of 0
+            # is right then, but not the drive point this test is about)
+            applied = math.isclose(state.drive_frequency_hz, feeders[ns], rel_tol=1e-9) and (
+                math.isclose(state.drive_amplitude_n, 40.0, rel_tol=1e-9)
+            )
+            if applied and math.isinf(driven_from[ns]):
+                driven_from[ns] = _seconds(state.header.stamp)
+
         for ns in feeders:
             node.create_subscription(VehicleEstimate, f"{ns}/estimate", estimates[ns].append, 100)
             node.create_subscription(
                 PartStateArray, f"{ns}/parts/state", parts[ns].append, RELIABLE
+            )
+            node.create_subscription(
+                CarrierState, f"{ns}/carrier/state", lambda m, ns=ns: note_drive(ns, m), RELIABLE
             )
         node.create_subscription(DiagnosticArray, "/diagnostics", diagnostics.append, 100)
         for ns, frequency in feeders.items():
@@ -121,9 +136,10 @@ def test_namespaced_feeders_side_by_side_estimate_their_own_true_speed() -> None
         def judged(ns: str) -> list[VehicleEstimate]:
             """The estimates the truth can judge: vouched for by the estimator (status OK,
             confident; after a sample gap on a loaded machine it restarts its statistics and says
-            so) and with their window inside the received part states (the probe's subscription
-            starts late; either stream may run a few samples ahead)."""
+            so), with their window inside the received part states (the probe's subscription
+            starts late; either stream may run a few samples ahead) and under the applied drive."""
             first, last = state_span(ns)
+            first = max(first, driven_from[ns])
             return [
                 e
                 for e in estimates[ns]
@@ -140,9 +156,10 @@ def test_namespaced_feeders_side_by_side_estimate_their_own_true_speed() -> None
                 for e in estimates[ns][-8:]
             ]  # fmt: skip
 
-        assert wait_until(lambda: all(judged(ns) for ns in feeders), 60.0), {
-            ns: recent(ns) for ns in feeders
-        }
+        assert wait_until(lambda: all(judged(ns) for ns in feeders), 60.0), (
+            driven_from,
+            {ns: recent(ns) for ns in feeders},
+        )
         time.sleep(3.0)  # a full estimator window (2 s) more of steady state
         speeds = {}
         for ns in feeders:
