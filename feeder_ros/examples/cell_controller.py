@@ -70,6 +70,7 @@ class CellController(Node):
         # kept for the node's life: destroying an action client while the executor thread spins
         # can leave that thread a dangling handle (RCLError in its wait set)
         self._feed_client: Any = ActionClient(self, FeedParts, "feed_parts")
+        self._service_clients: dict[str, Any] = {}  # service name -> client, see call()
         self._start_time = time.monotonic()
 
     # -- inputs --------------------------------------------------------------------------------
@@ -97,20 +98,44 @@ class CellController(Node):
         extra = ", ".join(f"{k}={v}" for k, v in details.items())
         print(f"[controller {elapsed:6.1f} s] {step}" + (f": {extra}" if extra else ""), flush=True)
 
-    def call(self, service_type: Any, name: str, request: Any, timeout_s: float = 30.0) -> Any:
-        client: Any = self.create_client(service_type, name)
-        try:
-            if not client.wait_for_service(timeout_sec=timeout_s):
-                raise RuntimeError(f"service {self.get_namespace()}/{name} is not available")
+    def call(
+        self,
+        service_type: Any,
+        name: str,
+        request: Any,
+        timeout_s: float = 30.0,
+        ask_again_s: float | None = None,
+    ) -> Any:
+        """Call a service and wait for its answer at most ``timeout_s``.
+
+        A server can drop an answer: it sends it while it has not yet discovered the client's
+        reply reader (rmw: "failed to send response (timeout)"), and the request is then answered
+        never. So a request without an answer after ``ask_again_s`` is sent again; only for
+        requests that may run twice (a query, ``start``/``stop``/``reset_fault``: the second finds
+        the drive where the first left it). A lifecycle transition or ``set_target_speed`` (which
+        would restart the speed trim) is sent once. Clients are kept for the node's life: once a
+        server has answered a client, its reply path is known."""
+        client = self._service_clients.get(name)
+        if client is None:
+            client = self._service_clients[name] = self.create_client(service_type, name)
+        if not client.wait_for_service(timeout_sec=timeout_s):
+            raise RuntimeError(f"service {self.get_namespace()}/{name} is not available")
+        deadline = time.monotonic() + timeout_s
+        while True:
             future = client.call_async(request)
-            deadline = time.monotonic() + timeout_s
+            again = time.monotonic() + (ask_again_s if ask_again_s is not None else math.inf)
             while not future.done():
-                if time.monotonic() > deadline:
+                now = time.monotonic()
+                if now > deadline:
+                    client.remove_pending_request(future)
                     raise RuntimeError(f"service {name} did not answer in {timeout_s} s")
+                if now > again:
+                    break
                 time.sleep(0.02)
-            return future.result()
-        finally:
-            self.destroy_client(client)
+            if future.done():
+                return future.result()
+            client.remove_pending_request(future)
+            self.log("no answer, asking again", service=name, after_s=ask_again_s)
 
     def wait_for(self, what: str, predicate: Any, timeout_s: float) -> bool:
         deadline = time.monotonic() + timeout_s
@@ -127,7 +152,9 @@ class CellController(Node):
 
     # -- the scenario --------------------------------------------------------------------------
     def bring_up(self) -> None:
-        answer = self.call(GetState, "drive_interface/get_state", GetState.Request())
+        answer = self.call(
+            GetState, "drive_interface/get_state", GetState.Request(), ask_again_s=5.0
+        )
         label = answer.current_state.label
         self.log("drive interface lifecycle state", state=label)
         for transition, needed in (
@@ -145,7 +172,7 @@ class CellController(Node):
                 self.log(f"lifecycle -> {label}", success=result.success)
 
     def trigger(self, name: str) -> bool:
-        answer = self.call(Trigger, name, Trigger.Request())
+        answer = self.call(Trigger, name, Trigger.Request(), ask_again_s=5.0)
         self.log(name, success=answer.success, message=answer.message)
         return bool(answer.success)
 
@@ -154,7 +181,7 @@ class CellController(Node):
         start-up the topic is still being discovered) it refuses, so ask again for a while."""
         deadline = time.monotonic() + wait_s
         while True:
-            answer = self.call(Trigger, "start", Trigger.Request())
+            answer = self.call(Trigger, "start", Trigger.Request(), ask_again_s=5.0)
             unheard = not answer.success and "send heartbeats first" in answer.message
             if not unheard or time.monotonic() > deadline:
                 self.log("start", success=answer.success, message=answer.message)
