@@ -3,10 +3,13 @@
 from __future__ import annotations
 
 import json
+import math
 import time
 from pathlib import Path
 from typing import Any
 
+import numpy as np
+import pytest
 import rclpy
 from ros_test_tools import probe_node
 
@@ -17,6 +20,7 @@ from feeder_ros.demo import (
     monitor_tolerance,
     problems,
     summarise,
+    true_speed,
     wait_for_nodes,
 )
 
@@ -242,3 +246,22 @@ def test_a_feed_parts_goal_that_did_not_deliver_fails_the_demo(tmp_path: Path) -
     assert problems(summary, 0, 0, DRIVE) == [
         "feed_parts ended starved: starved: no part past sensor 1 for 20.0 s (1 parts delivered)"
     ]
+
+
+def test_the_truth_is_the_parts_mean_speed_through_their_in_cycle_swing() -> None:
+    """Parts at 8 mm/s that swing +-0.5 mm at 30 Hz, sampled at 50 Hz (the demo's parts/state):
+    the end samples of a 4 s span can be 1 mm apart beyond the travel (3 %); the truth is not
+    moved by where in the swing they fall. A part put down or gone within the span is left out."""
+    t = np.arange(0.0, 10.0, 0.02)
+    for phase in np.linspace(0.0, 2.0 * math.pi, 7):
+        swing = 0.5e-3 * np.sin(2.0 * math.pi * 30.0 * t + phase)
+        parts = [
+            (
+                float(tk),
+                {0: 0.008 * tk + sk, 1: 0.05 + 0.008 * tk + sk} | ({2: 0.0} if tk > 8 else {}),
+            )
+            for tk, sk in zip(t, swing, strict=True)
+        ]
+        # (the end samples, 5.0 and 8.96 s, fall 0.8 cycles apart: their difference errs 0.2-1.7 %)
+        assert true_speed(parts, 5.0, 8.97) == pytest.approx(0.008, rel=0.001), phase
+    assert math.isnan(true_speed(parts, 20.0, 24.0))  # nothing recorded then
