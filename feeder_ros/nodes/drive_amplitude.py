@@ -60,6 +60,7 @@ from feeder_ros.nodes.drive_interface_parameters import (
     SET_POINT,
     amplitude_settings_from,
 )
+from feeder_ros.nodes.ros_time import stamp_seconds
 from feeder_ros.srv import SetVibrationAmplitude
 
 if TYPE_CHECKING:
@@ -182,7 +183,7 @@ class AmplitudeShell:
     def _on_imu(self, message: Imu) -> None:
         if self._engaged_s is not None:
             stamp = message.header.stamp
-            self._t.append(float(stamp.sec) + float(stamp.nanosec) * 1e-9)
+            self._t.append(stamp_seconds(stamp))
             self._a.append(float(message.linear_acceleration.x))
 
     def _on_batch(self, message: AccelerometerBatch) -> None:
@@ -196,7 +197,7 @@ class AmplitudeShell:
                 throttle_duration_sec=5.0,
             )
             return
-        start = float(message.header.stamp.sec) + float(message.header.stamp.nanosec) * 1e-9
+        start = stamp_seconds(message.header.stamp)
         samples = np.asarray(message.acceleration_x_mps2, dtype=np.float64)
         self._t.extend((start + period * np.arange(samples.size)).tolist())
         self._a.extend(samples.tolist())

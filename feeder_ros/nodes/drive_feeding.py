@@ -38,6 +38,7 @@ from feeder_ros.drive.part_feed import (
     request_refusal,
 )
 from feeder_ros.msg import PartSensorEvent
+from feeder_ros.nodes.ros_time import clock_seconds, stamp_seconds
 
 if TYPE_CHECKING:
     from rclpy.node import Node
@@ -126,7 +127,7 @@ class Feeding:
                 throttle_duration_sec=5.0,
             )
             return
-        t_s = float(message.header.stamp.sec) + float(message.header.stamp.nanosec) * 1e-9
+        t_s = stamp_seconds(message.header.stamp)
         if not math.isfinite(t_s) or t_s <= 0.0:
             return
         # touching parts give the next part's rising edge and the last one's falling edge at one
@@ -249,7 +250,7 @@ class Feeding:
         )
 
     async def _execute(self, handle: Any) -> Any:
-        now_s = float(self._node.get_clock().now().nanoseconds) * 1e-9
+        now_s = clock_seconds(self._node.get_clock())
         request = handle.request
         refusal = self._refusal(request, now_s)
         controller = self._controller

@@ -78,6 +78,7 @@ from feeder_ros.nodes.drive_interface_parameters import (
 )
 from feeder_ros.nodes.drive_speed_feedback import SpeedFeedback
 from feeder_ros.nodes.ros_parameters import declare_parameters, validator
+from feeder_ros.nodes.ros_time import clock_seconds, stamp_seconds
 from feeder_ros.nodes.runner import run_node
 from feeder_ros.nodes.stall_detector import StallDetector
 from feeder_ros.physics.parameters import FeederParameters
@@ -120,10 +121,6 @@ def check_combination(values: dict[str, Any]) -> None:
 
 
 FEEDBACK_QOS = QoSProfile(depth=100, reliability=ReliabilityPolicy.RELIABLE)
-
-
-def _stamp_s(stamp: Any) -> float:
-    return float(stamp.sec) + float(stamp.nanosec) * 1e-9
 
 
 class DriveInterface(LifecycleNode):
@@ -170,7 +167,7 @@ class DriveInterface(LifecycleNode):
 
     # -- time and parameters -------------------------------------------------------------------
     def _now(self) -> float:
-        return float(self.get_clock().now().nanoseconds) * 1e-9
+        return clock_seconds(self.get_clock())
 
     def _refuse_configure_time_changes(self, parameters: list[AnyParameter]) -> SetParametersResult:
         """A parameter read at configure changes only while the node is unconfigured: changed
@@ -546,7 +543,7 @@ class DriveInterface(LifecycleNode):
         assert self._tracked is not None
         self._feeding.speed_mps = speed_mps
         now = self._now()
-        t_s = _stamp_s(stamp) or now
+        t_s = stamp_seconds(stamp) or now
         if t_s > now + FUTURE_STAMP_TOLERANCE_S and math.isfinite(speed_mps):
             self.get_logger().warning(
                 f"{topic} stamped {t_s:.3f} s, {t_s - now:.3g} s ahead of this node's clock "

@@ -34,6 +34,7 @@ from feeder_ros.drive.controller import DriveController
 from feeder_ros.drive.speed_model import SpeedModel, TableSpeedModel, steerable
 from feeder_ros.drive.speed_trim import SpeedTrim, TrimSettings
 from feeder_ros.msg import PartCalibration, VehicleEstimate
+from feeder_ros.nodes.ros_time import clock_seconds, stamp_seconds
 from feeder_ros.physics.parameters import FeederParameters, ParameterError
 
 __all__ = ["SpeedFeedback", "trim_settings_from"]
@@ -180,7 +181,7 @@ class SpeedFeedback:
             else math.nan  # an identified model: unknown, the trim takes 1
         )
         amplitude = self._trim.reading(
-            float(stamp.sec) + float(stamp.nanosec) * 1e-9,
+            stamp_seconds(stamp),
             message.window_s,
             message.mean_speed_mps,
             message.mean_speed_uncertainty_mps,
@@ -190,7 +191,7 @@ class SpeedFeedback:
         )
         if amplitude is None:
             return
-        now = float(self._node.get_clock().now().nanoseconds) * 1e-9
+        now = clock_seconds(self._node.get_clock())
         self._apply(controller, now, controller.set_point.frequency_hz, amplitude, "speed trim")
         self._node.get_logger().info(
             f"speed trim: {self._trim.last_note}: {amplitude:.2f} % for "
@@ -205,7 +206,7 @@ class SpeedFeedback:
         # the first message is the baseline (a calibration restored from its file counts the
         # transits of earlier runs); a transit is used when the count rises (fewer: a reset)
         if self._transits_used is not None and used > self._transits_used:
-            self._trim.transit_used(float(stamp.sec) + float(stamp.nanosec) * 1e-9)
+            self._trim.transit_used(stamp_seconds(stamp))
         self._transits_used = used
         controller, plant, rebuild = self._controller, self._plant, self._rebuild
         if controller is None or plant is None or rebuild is None:

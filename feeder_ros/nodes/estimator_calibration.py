@@ -38,6 +38,7 @@ from feeder_ros.estimation.vehicle_estimator import VehicleEstimator
 from feeder_ros.msg import PartCalibration, PartSensorEvent
 from feeder_ros.node_interfaces import ServiceSpec, TopicSpec
 from feeder_ros.nodes.diagnostics import diagnostic_status
+from feeder_ros.nodes.ros_time import stamp_seconds
 from feeder_ros.physics.parameters import ParameterError, ParameterSpec
 from feeder_ros.srv import SetMeasuredSpeed
 
@@ -254,7 +255,7 @@ class EstimatorCalibration:
     # -- inputs ----------------------------------------------------------------------------------
     def _on_sensor_event(self, message: PartSensorEvent) -> None:
         part = None if message.part_id == PartSensorEvent.PART_ID_UNKNOWN else message.part_id
-        stamp = float(message.header.stamp.sec) + float(message.header.stamp.nanosec) * 1e-9
+        stamp = stamp_seconds(message.header.stamp)
         with self._lock:
             estimator = self._estimator()
             outcome = self._source.on_sensor_edge(

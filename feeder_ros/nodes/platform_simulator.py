@@ -52,6 +52,7 @@ from feeder_ros.nodes.platform_simulator_parameters import (
     parse_positions,
 )
 from feeder_ros.nodes.ros_parameters import declare_parameters, validator
+from feeder_ros.nodes.ros_time import clock_seconds
 from feeder_ros.nodes.runner import run_node
 from feeder_ros.physics.command_policy import Command, Decision, decide
 from feeder_ros.physics.drive import DriveError
@@ -236,7 +237,7 @@ class PlatformSimulator(Node):
         self._start()
         self._timer = self.create_timer(self._values["tick_period_s"], self._tick, clock=self._wall)
         self._diagnostics_pub = pub(DiagnosticArray, "/diagnostics", 10)
-        self._report = (self._wall.now().nanoseconds * 1e-9, self._sim.time_s)
+        self._report = (clock_seconds(self._wall), self._sim.time_s)
         self.create_timer(1.0, self._publish_diagnostics, clock=self._wall)
         self.get_logger().info(
             f"simulating f_n = {self._sim.params.forward_natural_frequency_hz:.2f} / "
@@ -347,7 +348,7 @@ class PlatformSimulator(Node):
         self._rebase_pacing()
 
     def _rebase_pacing(self) -> None:
-        self._pace_wall_s = self._wall.now().nanoseconds * 1e-9
+        self._pace_wall_s = clock_seconds(self._wall)
         self._pace_sim_s = self._sim.time_s
 
     def _stamp(self, t_s: float) -> TimeMsg:
@@ -473,7 +474,7 @@ class PlatformSimulator(Node):
     # -- the loop ------------------------------------------------------------------------------
     def _schedule_time(self) -> float:
         """Where the paced simulation should be now (simulated time)."""
-        elapsed = self._wall.now().nanoseconds * 1e-9 - self._pace_wall_s
+        elapsed = clock_seconds(self._wall) - self._pace_wall_s
         return self._pace_sim_s + elapsed * float(self._values["real_time_factor"])
 
     def _lag_s(self) -> float:
@@ -529,7 +530,7 @@ class PlatformSimulator(Node):
 
     def _publish_diagnostics(self) -> None:
         with self._lock:
-            wall_now = self._wall.now().nanoseconds * 1e-9
+            wall_now = clock_seconds(self._wall)
             sim_now = self._sim.time_s
             wall_then, sim_then = self._report
             self._report = (wall_now, sim_now)

@@ -32,6 +32,7 @@ from feeder_ros.msg import (
 from feeder_ros.node_interfaces import NodeInterface, TopicSpec
 from feeder_ros.nodes.diagnostics import diagnostic_array, diagnostic_status
 from feeder_ros.nodes.ros_parameters import declare_parameters, validator
+from feeder_ros.nodes.ros_time import clock_seconds, stamp_seconds
 from feeder_ros.nodes.runner import run_node
 from feeder_ros.nodes.stall_detector import StallDetector
 from feeder_ros.physics.parameters import ParameterError, ParameterSpec
@@ -240,7 +241,7 @@ class SpeedMonitorNode(Node):
         )
 
     def _now(self) -> float:
-        return float(self.get_clock().now().nanoseconds) * 1e-9
+        return clock_seconds(self.get_clock())
 
     def _apply_parameters(self, parameters: list[AnyParameter]) -> None:
         for parameter in parameters:
@@ -261,7 +262,7 @@ class SpeedMonitorNode(Node):
     def _on_edge(self, message: PartSensorEvent) -> None:
         part = None if message.part_id == PartSensorEvent.PART_ID_UNKNOWN else message.part_id
         stamp = message.header.stamp
-        edge_t = stamp.sec + stamp.nanosec * 1e-9 if stamp.sec or stamp.nanosec else None
+        edge_t = stamp_seconds(stamp) if stamp.sec or stamp.nanosec else None
         with self._lock:
             self._monitor.on_sensor_edge(
                 self._now(), message.sensor_index, part, message.present, edge_t

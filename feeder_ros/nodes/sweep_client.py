@@ -55,7 +55,6 @@ from rclpy.node import Node
 from rclpy.parameter import Parameter
 from rclpy.qos import QoSProfile, ReliabilityPolicy
 from rclpy.signals import SignalHandlerOptions
-from rclpy.time import Time
 from std_msgs.msg import Header
 from std_srvs.srv import Trigger
 
@@ -68,6 +67,7 @@ from feeder_ros.identification.live_meters import (
 from feeder_ros.identification.sweep import SweepPlan, SweepPoint, SweepResult
 from feeder_ros.msg import DriveState, PartSensorEvent, PartStateArray, SpeedStatus
 from feeder_ros.nodes import runner
+from feeder_ros.nodes.ros_time import clock_seconds, stamp_seconds
 from feeder_ros.srv import SetDrive
 
 __all__ = [
@@ -98,10 +98,6 @@ class LiveSweepError(RuntimeError):
 
 
 # ------------------------------------------------------------------------------------ client
-
-
-def _stamp_s(header: Header) -> float:
-    return float(Time.from_msg(header.stamp).nanoseconds) * 1e-9
 
 
 class SweepClient:
@@ -161,7 +157,7 @@ class SweepClient:
     def _on_edge(self, message: PartSensorEvent) -> None:
         part = None if message.part_id == PartSensorEvent.PART_ID_UNKNOWN else int(message.part_id)
         self.transits.add(
-            _stamp_s(message.header),
+            stamp_seconds(message.header.stamp),
             int(message.sensor_index),
             float(message.sensor_position_m),
             part,
@@ -169,17 +165,17 @@ class SweepClient:
         )
 
     def _on_status(self, message: SpeedStatus) -> None:
-        self.status.add(_stamp_s(message.header), float(message.estimated_speed_mps))
+        self.status.add(stamp_seconds(message.header.stamp), float(message.estimated_speed_mps))
 
     def _on_parts(self, message: PartStateArray) -> None:
         self.truth.add(
-            _stamp_s(message.header),
+            stamp_seconds(message.header.stamp),
             {int(p.part_id): float(p.position_m) for p in message.parts if p.on_track},
         )
 
     # -- helpers (main thread) ---------------------------------------------------------------------
     def now_s(self) -> float:
-        return float(self.node.get_clock().now().nanoseconds) * 1e-9
+        return clock_seconds(self.node.get_clock())
 
     def state(self) -> DriveState | None:
         with self._state_lock:

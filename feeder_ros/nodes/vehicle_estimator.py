@@ -42,6 +42,7 @@ from feeder_ros.nodes import estimator_calibration as calibration
 from feeder_ros.nodes.diagnostics import diagnostic_array, diagnostic_status
 from feeder_ros.nodes.estimator_calibration import EstimatorCalibration, measurement_source
 from feeder_ros.nodes.ros_parameters import declare_parameters, validator
+from feeder_ros.nodes.ros_time import stamp_seconds
 from feeder_ros.nodes.runner import run_node
 from feeder_ros.nodes.stall_detector import StallDetector
 from feeder_ros.physics.parameters import (
@@ -234,10 +235,6 @@ def imu_sample(data: bytes) -> tuple[float, tuple[float, float, float]]:
     return sec + nanosec * 1e-9, (x, y, z)
 
 
-def _seconds(stamp: Any) -> float:
-    return float(stamp.sec) + float(stamp.nanosec) * 1e-9
-
-
 def _check_combination(values: dict[str, Any]) -> None:
     low, high = values["min_drive_frequency_hz"], values["max_drive_frequency_hz"]
     if low >= high:
@@ -397,13 +394,13 @@ class VehicleEstimatorNode(Node):
                 throttle_duration_sec=5.0,
             )
             return
-        t = _seconds(message.header.stamp) + period * np.arange(values.size)
+        t = stamp_seconds(message.header.stamp) + period * np.arange(values.size)
         with self._lock:
             self._batches.append((t, values))
 
     def _on_state(self, message: CarrierState) -> None:
         with self._lock:
-            self._queue_t.append(_seconds(message.header.stamp))
+            self._queue_t.append(stamp_seconds(message.header.stamp))
             self._queue_value.append(message.displacement_m)
 
     def _on_command(self, message: DriveCommand) -> None:
@@ -417,7 +414,7 @@ class VehicleEstimatorNode(Node):
         amplitude = message.amplitude_n if message.enabled else 0.0
         with self._lock:
             self._drain()  # samples before the command belong to the previous drive
-            drive = (frequency, amplitude, _seconds(message.header.stamp))
+            drive = (frequency, amplitude, stamp_seconds(message.header.stamp))
             try:
                 self._estimator.set_drive(*drive)
             except ValueError as error:
