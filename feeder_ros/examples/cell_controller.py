@@ -46,6 +46,7 @@ from std_srvs.srv import Trigger
 
 from feeder_ros.action import FeedParts
 from feeder_ros.msg import DriveState, SpeedStatus, VehicleEstimate
+from feeder_ros.nodes.service_calls import call_service
 from feeder_ros.ros_compat import RosSession
 from feeder_ros.srv import SetTargetSpeed
 
@@ -106,36 +107,20 @@ class CellController(Node):
         timeout_s: float = 30.0,
         ask_again_s: float | None = None,
     ) -> Any:
-        """Call a service and wait for its answer at most ``timeout_s``.
-
-        A server can drop an answer: it sends it while it has not yet discovered the client's
-        reply reader (rmw: "failed to send response (timeout)"), and the request is then answered
-        never. So a request without an answer after ``ask_again_s`` is sent again; only for
-        requests that may run twice (a query, ``start``/``stop``/``reset_fault``: the second finds
-        the drive where the first left it). A lifecycle transition or ``set_target_speed`` (which
-        would restart the speed trim) is sent once. Clients are kept for the node's life: once a
-        server has answered a client, its reply path is known."""
+        """Call a service and wait for its answer at most ``timeout_s``; one without an answer
+        after ``ask_again_s`` is sent again (:func:`feeder_ros.nodes.service_calls.call_service`:
+        only for requests that may run twice, such as get_state, ``start``/``stop``/
+        ``reset_fault``, where the second finds the drive where the first left it; a lifecycle
+        transition or ``set_target_speed``, which would restart the speed trim, is sent once).
+        Clients are kept for the node's life."""
         client = self._service_clients.get(name)
         if client is None:
             client = self._service_clients[name] = self.create_client(service_type, name)
-        if not client.wait_for_service(timeout_sec=timeout_s):
-            raise RuntimeError(f"service {self.get_namespace()}/{name} is not available")
-        deadline = time.monotonic() + timeout_s
-        while True:
-            future = client.call_async(request)
-            again = time.monotonic() + (ask_again_s if ask_again_s is not None else math.inf)
-            while not future.done():
-                now = time.monotonic()
-                if now > deadline:
-                    client.remove_pending_request(future)
-                    raise RuntimeError(f"service {name} did not answer in {timeout_s} s")
-                if now > again:
-                    break
-                time.sleep(0.02)
-            if future.done():
-                return future.result()
-            client.remove_pending_request(future)
+
+        def asking_again() -> None:
             self.log("no answer, asking again", service=name, after_s=ask_again_s)
+
+        return call_service(client, request, timeout_s, ask_again_s, asking_again)
 
     def wait_for(self, what: str, predicate: Any, timeout_s: float) -> bool:
         deadline = time.monotonic() + timeout_s

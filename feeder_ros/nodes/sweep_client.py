@@ -68,6 +68,7 @@ from feeder_ros.identification.sweep import SweepPlan, SweepPoint, SweepResult
 from feeder_ros.msg import DriveState, PartSensorEvent, PartStateArray, SpeedStatus
 from feeder_ros.nodes import runner
 from feeder_ros.nodes.ros_time import clock_seconds, stamp_seconds
+from feeder_ros.nodes.service_calls import ServiceCallError, call_service
 from feeder_ros.srv import SetDrive
 
 __all__ = [
@@ -91,6 +92,11 @@ RELIABLE = QoSProfile(depth=1000, reliability=ReliabilityPolicy.RELIABLE)
 
 Progress = Callable[[int, int], None]
 Log = Callable[[str], None]
+
+
+#: the drive interface's services a request may be sent to twice (the second finds the drive
+#: where the first left it)
+REPEATABLE = frozenset({"get_state", "get_parameters", "start", "stop"})
 
 
 class LiveSweepError(RuntimeError):
@@ -186,19 +192,17 @@ class SweepClient:
         return f"{ns}/{relative}"
 
     def call(self, name: str, request: Any, timeout_s: float = 10.0) -> Any:
-        client = self._services[name]
-        if not client.wait_for_service(timeout_sec=timeout_s):
-            raise LiveSweepError(f"service {client.service_name} is not available")
-        future = client.call_async(request)
-        deadline = time.monotonic() + timeout_s
-        while not future.done():
-            if time.monotonic() > deadline:
-                client.remove_pending_request(future)
-                raise LiveSweepError(
-                    f"service {client.service_name} did not answer in {timeout_s} s"
-                )
-            time.sleep(0.005)
-        return future.result()
+        """The service's answer; a lost answer to a request of :data:`REPEATABLE` is asked
+        again (:func:`feeder_ros.nodes.service_calls.call_service`)."""
+        ask_again_s = min(5.0, timeout_s / 2.0) if name in REPEATABLE else None
+
+        def asking_again() -> None:
+            self.log(f"no answer from {name} after {ask_again_s:g} s: asking again")
+
+        try:
+            return call_service(self._services[name], request, timeout_s, ask_again_s, asking_again)
+        except ServiceCallError as error:
+            raise LiveSweepError(str(error)) from error
 
     def _check_fault(self) -> None:
         state = self.state()
