@@ -199,7 +199,9 @@ def test_a_live_sweep_whose_teardown_hangs_ends_with_its_points_saved(tmp_path: 
     out = tmp_path / "stuck"
     with running(SIMULATOR), running(DRIVE):
         sweep = subprocess.run(
-            [sys.executable, str(script), *SWEEP[1:], "--frequencies", "21", "--window", "2",
+            # a 4 s window: the track starts empty but for the bowl's first part, which needs
+            # about 2 s (plus the simulator's lag on a loaded machine) to pass both sensors
+            [sys.executable, str(script), *SWEEP[1:], "--frequencies", "21", "--window", "4",
              "--output", str(out)],
             capture_output=True, text=True, timeout=120,  # without the watchdog: never ends
         )  # fmt: skip
