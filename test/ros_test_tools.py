@@ -28,6 +28,8 @@ from rclpy.context import Context
 from rclpy.executors import SingleThreadedExecutor
 from rclpy.node import Node
 
+from feeder_ros.nodes.service_calls import ServiceCallError, call_service
+
 REPO = Path(__file__).resolve().parents[1]
 
 
@@ -149,29 +151,22 @@ def call(
     not yet have matched the client's fresh reply reader when the request arrives; Fast DDS then
     drops the reply ("failed to send response (timeout)" in the server's log). So a request of
     :data:`REPEATABLE_SERVICES` is sent again when ``attempt_s`` pass without an answer (until
-    ``timeout_s``). Other requests are sent once: sent twice, they could act twice. (Waiting
-    after a new client is seen would not be safe either: tests time what a call sets off from
-    just before it.)"""
+    ``timeout_s``; :func:`feeder_ros.nodes.service_calls.call_service`). Other requests are sent
+    once: sent twice, they could act twice. (Waiting after a new client is seen would not be safe
+    either: tests time what a call sets off from just before it.)"""
     clients = _clients.setdefault(node, {})
     client = clients.get((service_type, name))
     if client is None:
         client = clients[(service_type, name)] = node.create_client(service_type, name)
     assert client.wait_for_service(timeout_sec=timeout_s), f"{name} not available"
-    repeatable = service_type in REPEATABLE_SERVICES
-    deadline = time.monotonic() + timeout_s
-    while True:
-        future = client.call_async(request)
-        attempt_end = min(deadline, time.monotonic() + attempt_s) if repeatable else deadline
-        while not future.done() and time.monotonic() < attempt_end:
-            time.sleep(0.01)
-        if future.done():
-            return future.result()
-        client.remove_pending_request(future)
-        if time.monotonic() >= deadline:
-            raise AssertionError(
-                f"{name} did not answer within {timeout_s} s (an answer lost in DDS discovery shows"
-                " as 'failed to send response' in the server's output)"
-            )
+    ask_again_s = attempt_s if service_type in REPEATABLE_SERVICES else None
+    try:
+        return call_service(client, request, timeout_s, ask_again_s)
+    except ServiceCallError as error:
+        raise AssertionError(
+            f"{name} did not answer within {timeout_s} s (an answer lost in DDS discovery shows"
+            " as 'failed to send response' in the server's output)"
+        ) from error
 
 
 class DrainedProcess(subprocess.Popen[str]):
