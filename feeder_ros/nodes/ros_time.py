@@ -1,9 +1,7 @@
 """ROS time as float seconds, one way for every node.
 
 Stamps and clocks carry integer seconds and nanoseconds; the cores (drive, estimation,
-monitoring) work in float seconds. ``sec + nanosec * 1e-9`` keeps the nanosecond at today's epoch
-(a float's 52 bits hold 1.8e9 s to about 0.2 us; nanoseconds as one integer times 1e-9 round
-the same way).
+monitoring) work in float seconds, which hold today's epoch (1.8e9 s) to about 0.2 us.
 """
 
 from __future__ import annotations
