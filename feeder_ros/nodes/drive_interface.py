@@ -31,7 +31,6 @@ from __future__ import annotations
 import math
 import os
 import time
-from pathlib import Path
 from typing import TYPE_CHECKING, Any
 
 from diagnostic_msgs.msg import DiagnosticArray
@@ -53,9 +52,13 @@ from feeder_ros.drive.level_control import LevelControl
 from feeder_ros.drive.limits import DriveLimits, Outcome
 from feeder_ros.drive.modbus import ModbusTcpBackend
 from feeder_ros.drive.resonance_tracker import FUTURE_STAMP_TOLERANCE_S, TrackerMode
-from feeder_ros.drive.speed_model import SpeedModel, cached_speed_table, default_cache_dir
+from feeder_ros.drive.speed_model import SpeedModel
+from feeder_ros.drive.speed_model_source import (
+    SpeedModelSource,
+    build_speed_model,
+    physics_speed_table,
+)
 from feeder_ros.drive.tracked_control import TrackedControl, apply_loop_point
-from feeder_ros.identification.speed_model_file import identified_speed_table, load_speed_model
 from feeder_ros.msg import DriveCommand, PartStateArray, SpeedStatus, VehicleEstimate
 from feeder_ros.msg import DriveState as DriveStateMsg
 from feeder_ros.nodes.diagnostics import diagnostic_array, diagnostic_status
@@ -67,13 +70,13 @@ from feeder_ros.nodes.drive_interface_parameters import (
     INTERFACE,
     LIMIT_PARAMETERS,
     PARAMETERS,
-    PLANT_PREFIX,
     TRACKER_FIELDS,
     level_settings_from,
     limits_from,
     modbus_settings_from,
     plant_from,
     register_map_from,
+    speed_model_source_from,
     tracker_settings_from,
 )
 from feeder_ros.nodes.drive_speed_feedback import SpeedFeedback
@@ -82,7 +85,6 @@ from feeder_ros.nodes.ros_time import clock_seconds, stamp_seconds
 from feeder_ros.nodes.runner import run_node
 from feeder_ros.nodes.stall_detector import StallDetector
 from feeder_ros.physics.parameters import FeederParameters
-from feeder_ros.physics.simulation import limited_threads
 from feeder_ros.srv import SetDrive, SetTargetSpeed
 
 if TYPE_CHECKING:
@@ -225,7 +227,10 @@ class DriveInterface(LifecycleNode):
         try:
             limits = limits_from(values)
             level = LevelControl(level_settings_from(values))
-            speed_model = self._build_speed_model(values, limits)
+            source = speed_model_source_from(values, SPEED_TABLE_THREADS)
+            speed_model, self._speed_source = build_speed_model(
+                source, plant_from(values), limits, self._speed_table_not_cached
+            )
         except (ValueError, RuntimeError, OSError) as error:
             self.get_logger().error(f"configure failed: {error}")
             return TransitionCallbackReturn.FAILURE
@@ -261,11 +266,11 @@ class DriveInterface(LifecycleNode):
             )
         self._backend_fault = ""
         self._backend.connect()
-        table = values["speed_model_enabled"] and not values["speed_model_file"]
+        table = source.enabled and not source.file
         self._speed_feedback.configure(
             self._controller,
             plant_from(values),
-            (lambda plant: self._speed_table(plant, values, limits)) if table else None,
+            (lambda plant: self._speed_table(plant, limits, source)) if table else None,
         )
         self._tracked = TrackedControl(tracker_settings_from(values), limits, self._log)
         self._tracked.enabled = bool(values["tracking.enabled"])
@@ -295,53 +300,12 @@ class DriveInterface(LifecycleNode):
             "computed again at the next configure"
         )
 
-    def _build_speed_model(self, values: dict[str, Any], limits: DriveLimits) -> SpeedModel | None:
-        if not values["speed_model_enabled"]:
-            self._speed_source = "disabled"
-            return None
-        if values["speed_model_file"]:
-            return self._identified_speed_model(Path(values["speed_model_file"]), values, limits)
-        return self._speed_table(plant_from(values), values, limits)
-
     def _speed_table(
-        self, plant: FeederParameters, values: dict[str, Any], limits: DriveLimits
+        self, plant: FeederParameters, limits: DriveLimits, source: SpeedModelSource
     ) -> SpeedModel:
-        """The physics table for ``plant`` (from the cache, or simulated and stored)."""
-        cache = values["speed_model_cache_dir"]
-        # a table not yet cached is simulated here (configure, a calibration): leave a core to
-        # the live nodes beside this one (a 2-core machine starved the simulator and estimator)
-        with limited_threads(SPEED_TABLE_THREADS):
-            model, path, loaded = cached_speed_table(
-                plant,
-                limits,
-                Path(cache).expanduser() if cache else default_cache_dir(),
-                values["speed_model_frequency_steps"],
-                values["speed_model_amplitude_steps"],
-                values["speed_model_duration_s"],
-                on_store_error=self._speed_table_not_cached,
-            )
-        low, high = model.reachable_range()
-        self._speed_source = (
-            f"{'loaded' if loaded else 'computed'} table {path.name}, {low:.4g}..{high:.4g} m/s"
-        )
-        return model
-
-    def _identified_speed_model(
-        self, path: Path, values: dict[str, Any], limits: DriveLimits
-    ) -> SpeedModel:
-        """The identified model's speeds on the allowed frequencies (for the plant's part mass
-        when the file holds several); IdentificationError (a ValueError) fails the configure."""
-        model_file = load_speed_model(path.expanduser())
-        model = identified_speed_table(
-            model_file,
-            limits,
-            part_mass_kg=values[PLANT_PREFIX + "part_mass_kg"],
-            frequency_steps=values["speed_model_frequency_steps"],
-        )
-        low, high = model.reachable_range()
-        self._speed_source = (
-            f"identified model {path.name} ({len(model_file.entries)} fits), "
-            f"{low:.4g}..{high:.4g} m/s"
+        """The physics table for a calibrated ``plant``, named in diagnostics."""
+        model, self._speed_source = physics_speed_table(
+            plant, limits, source, self._speed_table_not_cached
         )
         return model
 

@@ -19,6 +19,7 @@ from feeder_ros.drive.level_control import LevelSettings
 from feeder_ros.drive.limits import DriveLimits, parse_bands
 from feeder_ros.drive.modbus import ModbusSettings, RegisterMap
 from feeder_ros.drive.resonance_tracker import TrackerSettings
+from feeder_ros.drive.speed_model_source import SpeedModelSource
 from feeder_ros.node_interfaces import NodeInterface, ServiceSpec, TopicSpec
 from feeder_ros.physics.parameters import PARAMETER_SPECS, FeederParameters, ParameterSpec
 
@@ -722,6 +723,18 @@ def plant_from(values: dict[str, Any]) -> FeederParameters:
             for key, value in values.items()
             if key.startswith(PLANT_PREFIX)
         }
+    )
+
+
+def speed_model_source_from(values: dict[str, Any], threads: int = 1) -> SpeedModelSource:
+    return SpeedModelSource(
+        enabled=bool(values["speed_model_enabled"]),
+        file=values["speed_model_file"],
+        cache_dir=values["speed_model_cache_dir"],
+        frequency_steps=values["speed_model_frequency_steps"],
+        amplitude_steps=values["speed_model_amplitude_steps"],
+        duration_s=values["speed_model_duration_s"],
+        threads=threads,
     )
 
 

@@ -16,7 +16,6 @@ By default simulated time follows the wall clock (times ``real_time_factor``); w
 
 from __future__ import annotations
 
-import dataclasses
 import math
 import threading
 import time
@@ -24,7 +23,7 @@ from typing import TYPE_CHECKING, Any
 
 import numpy as np
 from builtin_interfaces.msg import Time as TimeMsg
-from diagnostic_msgs.msg import DiagnosticArray, DiagnosticStatus, KeyValue
+from diagnostic_msgs.msg import DiagnosticArray
 from rclpy.clock import Clock
 from rclpy.clock_type import ClockType
 from rclpy.node import Node
@@ -44,11 +43,12 @@ from feeder_ros.msg import (
     PartState,
     PartStateArray,
 )
-from feeder_ros.node_interfaces import NodeInterface, ServiceSpec, TopicSpec
+from feeder_ros.nodes.diagnostics import diagnostic_array, diagnostic_status
 from feeder_ros.nodes.platform_simulator_parameters import (
+    INTERFACE,
     NODE_DEFAULTS,
-    NODE_MODEL_SPECS,
-    NODE_PARAMETERS,
+    PARAMETERS,
+    check_combination,
     parse_positions,
 )
 from feeder_ros.nodes.ros_parameters import declare_parameters, validator
@@ -59,6 +59,7 @@ from feeder_ros.physics.drive import DriveError
 from feeder_ros.physics.errors import SimulationError
 from feeder_ros.physics.parameters import PARAMETER_SPECS, FeederParameters, ParameterError
 from feeder_ros.physics.simulation import EventKind, FeederSimulator, PartSpec, Phase
+from feeder_ros.physics.simulation_health import simulation_health
 from feeder_ros.physics.track_end import Picks, TrackEndQueue, pick_edges, start_blocked
 from feeder_ros.sensors.accelerometer import AccelerometerModel
 from feeder_ros.sensors.part_presence import PartSensorArray
@@ -70,25 +71,6 @@ if TYPE_CHECKING:
 PHYSICS_DEFAULTS = FeederParameters().as_dict()
 #: a drive command's warning of one kind is logged at most this often
 WARNING_PERIOD_S = 5.0
-#: the model's drive parameters mean something else to the node: its drive comes from
-#: drive/command (the drive interface), never from a parameter. They stay declared, read-only,
-#: so the simulator's YAML (shared with ``feeder sim``, whose drive they are) loads without a
-#: warning, and a `ros2 param set` is refused with the reason instead of doing nothing.
-NODE_DRIVE_SPECS = {
-    "drive_frequency_hz": dataclasses.replace(
-        PARAMETER_SPECS["drive_frequency_hz"],
-        read_only=True,
-        description="drive frequency reported before the first drive/command; the node is "
-        "driven only by drive/command (`feeder sim`: the drive frequency f_d)",
-    ),
-    "drive_amplitude_n": dataclasses.replace(
-        PARAMETER_SPECS["drive_amplitude_n"],
-        read_only=True,
-        description="not used by the node, which starts at rest and is driven only by "
-        "drive/command (`feeder sim`: the drive amplitude A)",
-    ),
-}
-PARAMETERS = {**PARAMETER_SPECS, **NODE_DRIVE_SPECS, **NODE_MODEL_SPECS, **NODE_PARAMETERS}
 
 # sensor data: best effort and volatile like qos_profile_sensor_data, but with a history deep
 # enough for a tick's burst (at 1 kHz and 10 ms ticks, 10 samples leave at once): with
@@ -105,97 +87,6 @@ STATE_QOS = QoSProfile(
 )
 COMMAND_QOS = QoSProfile(depth=10, reliability=ReliabilityPolicy.RELIABLE)
 
-INTERFACE = NodeInterface(
-    executable="platform_simulator",
-    node_name="platform_simulator",
-    summary="simulates the carrier and its parts (exact stick-slip physics) under drive commands",
-    subscribes=(
-        TopicSpec(
-            "drive/command",
-            "feeder_ros/msg/DriveCommand",
-            "reliable, depth 10",
-            "drive force; applied at its stamp, a stale one is a stop; one stamped over 1 s "
-            "ahead, or outside 0 < f <= 1e5 Hz, 0 <= A <= 1e6 N, a finite ramp >= 0, is "
-            "ignored (warning)",
-        ),
-    ),
-    publishes=(
-        TopicSpec(
-            "imu",
-            "sensor_msgs/msg/Imu",
-            "best effort, depth 100",
-            "carrier accelerometer, x along track",
-        ),
-        TopicSpec(
-            "imu/batch",
-            "feeder_ros/msg/AccelerometerBatch",
-            "best effort, depth 100",
-            "the same samples in batches (publish_batches)",
-        ),
-        TopicSpec(
-            "carrier/state",
-            "feeder_ros/msg/CarrierState",
-            "reliable, depth 1000",
-            "carrier displacement, velocity, acceleration, stiffness branch, drive (ground truth)",
-        ),
-        TopicSpec(
-            "carrier/state_batch",
-            "feeder_ros/msg/CarrierStateBatch",
-            "reliable, depth 1000",
-            "the same samples in batches (publish_batches)",
-        ),
-        TopicSpec(
-            "parts/state",
-            "feeder_ros/msg/PartStateArray",
-            "reliable, depth 1000",
-            "the position, velocity and phase of each part on the track (ground truth; parts "
-            "queued at a stopper at their slots, sticking); a part that left is listed once "
-            "more, with on_track false",
-        ),
-        TopicSpec(
-            "parts/sensor_events",
-            "feeder_ros/msg/PartSensorEvent",
-            "reliable, depth 1000",
-            "part-present sensor edges at sensor_positions_m",
-        ),
-        TopicSpec(
-            "parts/exit",
-            "feeder_ros/msg/PartExit",
-            "reliable, depth 1000",
-            "a part left the feeder (feed count): past the end of the track, or picked at the "
-            "stopper (track_end)",
-        ),
-        TopicSpec("/clock", "rosgraph_msgs/msg/Clock", "reliable", "simulated time (use_sim_time)"),
-        TopicSpec(
-            "/diagnostics",
-            "diagnostic_msgs/msg/DiagnosticArray",
-            "reliable, depth 10",
-            "simulation health at 1 Hz: achieved real-time factor, lag, samples, parts; with a "
-            "stopper the queue, parts picked, feeds skipped on a full track",
-        ),
-    ),
-    services=(
-        ServiceSpec("~/reset", "std_srvs/srv/Trigger", "back to t = 0 with the initial parts"),
-        ServiceSpec("~/spawn_parts", "feeder_ros/srv/SpawnParts", "put parts on the track"),
-        ServiceSpec(
-            "~/pick_part",
-            "std_srvs/srv/Trigger",
-            "pick the front part at the stopper now (parts/exit); refused with the reason when "
-            "the queue is empty or track_end is open",
-        ),
-    ),
-    parameters=PARAMETERS,
-)
-
-
-def _check_combination(values: dict[str, Any]) -> None:
-    FeederParameters.from_mapping({k: values[k] for k in PARAMETER_SPECS})
-    parse_positions(values["sensor_positions_m"])
-    if values["real_time_factor"] == 0.0 and not values.get("use_sim_time", False):
-        raise ValueError("real_time_factor=0 (unpaced) needs use_sim_time=true")
-    if values["track_end"] == "stopper" and values["part_length_m"] <= 0.0:
-        raise ValueError("track_end=stopper needs part_length_m > 0 (the queue's slot)")
-
 
 class PlatformSimulator(Node):
     def __init__(self, **kwargs: Any) -> None:
@@ -204,9 +95,9 @@ class PlatformSimulator(Node):
             self, PARAMETERS.values(), {**PHYSICS_DEFAULTS, **NODE_DEFAULTS}
         )
         self._values["use_sim_time"] = self.get_parameter("use_sim_time").value
-        _check_combination(self._values)
+        check_combination(self._values)
         self.add_on_set_parameters_callback(
-            validator(PARAMETERS, check_all=_check_combination, current=self._current_values)
+            validator(PARAMETERS, check_all=check_combination, current=self._current_values)
         )
         self.add_post_set_parameters_callback(self._apply_parameters)
 
@@ -561,28 +452,12 @@ class PlatformSimulator(Node):
             }
             values |= self._queue.status() if self._queue is not None else {}
             failure = self._failure
-        level, text = DiagnosticStatus.OK, f"running at {achieved:.2f}x real time"
-        if failure is not None:
-            level, text = DiagnosticStatus.ERROR, failure
-        elif lag >= 0.1:
-            behind = (
-                f"{lag:.2f} s behind the wall clock, running at {achieved:.2f}x real time "
-                f"({factor:g}x requested); {late} drive commands applied late"
-            )
-            if lag >= float(self._values["max_lag_s"]):
-                level, text = DiagnosticStatus.ERROR, "cannot keep up: " + behind
-            else:
-                level, text = DiagnosticStatus.WARN, behind
-        status = DiagnosticStatus(
-            name=f"{self.get_fully_qualified_name()}: simulation",
-            hardware_id="simulated feeder",
-            level=level,
-            message=text,
-            values=[KeyValue(key=k, value=v) for k, v in values.items()],
+        level, text = simulation_health(
+            failure, lag, achieved, factor, late, float(self._values["max_lag_s"])
         )
-        array = DiagnosticArray(status=[status])
-        array.header.stamp = self._stamp(sim_now)
-        self._diagnostics_pub.publish(array)
+        name = f"{self.get_fully_qualified_name()}: simulation"
+        status = diagnostic_status(name, level, text, "simulated feeder", values)
+        self._diagnostics_pub.publish(diagnostic_array(self._stamp(sim_now), status))
 
     def _feed(self, target: float) -> None:
         """The bowl's feeds and the robot's periodic picks due by ``target``, in time order."""

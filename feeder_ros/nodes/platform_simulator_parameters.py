@@ -2,7 +2,9 @@
 
 The model parameters are :data:`feeder_ros.physics.parameters.PARAMETER_SPECS`; these are the
 node's own: sample rates, pacing, the sensors it simulates, the parts it puts on the track and the
-end of the track (open, or a stopper where parts queue until picked).
+end of the track (open, or a stopper where parts queue until picked). Also the node's declared
+interface (:data:`INTERFACE`: topics, services, every parameter) and the check of a parameter set
+as a whole (:func:`check_combination`), so docs and tests read them without starting ROS.
 """
 
 from __future__ import annotations
@@ -11,7 +13,8 @@ import dataclasses
 import math
 from typing import Any
 
-from feeder_ros.physics.parameters import PARAMETER_SPECS, ParameterSpec
+from feeder_ros.node_interfaces import NodeInterface, ServiceSpec, TopicSpec
+from feeder_ros.physics.parameters import PARAMETER_SPECS, FeederParameters, ParameterSpec
 
 #: model parameters that mean more to the node: the track length is also where a stopper stands
 NODE_MODEL_SPECS: dict[str, ParameterSpec] = {
@@ -210,3 +213,115 @@ def parse_positions(text: str) -> list[float]:
             raise ValueError(f"sensor_positions_m: {item!r} must be a finite position >= 0")
         positions.append(value)
     return sorted(positions)
+
+
+#: the model's drive parameters mean something else to the node: its drive comes from
+#: drive/command (the drive interface), never from a parameter. They stay declared, read-only,
+#: so the simulator's YAML (shared with ``feeder sim``, whose drive they are) loads without a
+#: warning, and a `ros2 param set` is refused with the reason instead of doing nothing.
+NODE_DRIVE_SPECS = {
+    "drive_frequency_hz": dataclasses.replace(
+        PARAMETER_SPECS["drive_frequency_hz"],
+        read_only=True,
+        description="drive frequency reported before the first drive/command; the node is "
+        "driven only by drive/command (`feeder sim`: the drive frequency f_d)",
+    ),
+    "drive_amplitude_n": dataclasses.replace(
+        PARAMETER_SPECS["drive_amplitude_n"],
+        read_only=True,
+        description="not used by the node, which starts at rest and is driven only by "
+        "drive/command (`feeder sim`: the drive amplitude A)",
+    ),
+}
+PARAMETERS = {**PARAMETER_SPECS, **NODE_DRIVE_SPECS, **NODE_MODEL_SPECS, **NODE_PARAMETERS}
+
+INTERFACE = NodeInterface(
+    executable="platform_simulator",
+    node_name="platform_simulator",
+    summary="simulates the carrier and its parts (exact stick-slip physics) under drive commands",
+    subscribes=(
+        TopicSpec(
+            "drive/command",
+            "feeder_ros/msg/DriveCommand",
+            "reliable, depth 10",
+            "drive force; applied at its stamp, a stale one is a stop; one stamped over 1 s "
+            "ahead, or outside 0 < f <= 1e5 Hz, 0 <= A <= 1e6 N, a finite ramp >= 0, is "
+            "ignored (warning)",
+        ),
+    ),
+    publishes=(
+        TopicSpec(
+            "imu",
+            "sensor_msgs/msg/Imu",
+            "best effort, depth 100",
+            "carrier accelerometer, x along track",
+        ),
+        TopicSpec(
+            "imu/batch",
+            "feeder_ros/msg/AccelerometerBatch",
+            "best effort, depth 100",
+            "the same samples in batches (publish_batches)",
+        ),
+        TopicSpec(
+            "carrier/state",
+            "feeder_ros/msg/CarrierState",
+            "reliable, depth 1000",
+            "carrier displacement, velocity, acceleration, stiffness branch, drive (ground truth)",
+        ),
+        TopicSpec(
+            "carrier/state_batch",
+            "feeder_ros/msg/CarrierStateBatch",
+            "reliable, depth 1000",
+            "the same samples in batches (publish_batches)",
+        ),
+        TopicSpec(
+            "parts/state",
+            "feeder_ros/msg/PartStateArray",
+            "reliable, depth 1000",
+            "the position, velocity and phase of each part on the track (ground truth; parts "
+            "queued at a stopper at their slots, sticking); a part that left is listed once "
+            "more, with on_track false",
+        ),
+        TopicSpec(
+            "parts/sensor_events",
+            "feeder_ros/msg/PartSensorEvent",
+            "reliable, depth 1000",
+            "part-present sensor edges at sensor_positions_m",
+        ),
+        TopicSpec(
+            "parts/exit",
+            "feeder_ros/msg/PartExit",
+            "reliable, depth 1000",
+            "a part left the feeder (feed count): past the end of the track, or picked at the "
+            "stopper (track_end)",
+        ),
+        TopicSpec("/clock", "rosgraph_msgs/msg/Clock", "reliable", "simulated time (use_sim_time)"),
+        TopicSpec(
+            "/diagnostics",
+            "diagnostic_msgs/msg/DiagnosticArray",
+            "reliable, depth 10",
+            "simulation health at 1 Hz: achieved real-time factor, lag, samples, parts; with a "
+            "stopper the queue, parts picked, feeds skipped on a full track",
+        ),
+    ),
+    services=(
+        ServiceSpec("~/reset", "std_srvs/srv/Trigger", "back to t = 0 with the initial parts"),
+        ServiceSpec("~/spawn_parts", "feeder_ros/srv/SpawnParts", "put parts on the track"),
+        ServiceSpec(
+            "~/pick_part",
+            "std_srvs/srv/Trigger",
+            "pick the front part at the stopper now (parts/exit); refused with the reason when "
+            "the queue is empty or track_end is open",
+        ),
+    ),
+    parameters=PARAMETERS,
+)
+
+
+def check_combination(values: dict[str, Any]) -> None:
+    FeederParameters.from_mapping({k: values[k] for k in PARAMETER_SPECS})
+    parse_positions(values["sensor_positions_m"])
+    if values["real_time_factor"] == 0.0 and not values.get("use_sim_time", False):
+        raise ValueError("real_time_factor=0 (unpaced) needs use_sim_time=true")
+    if values["track_end"] == "stopper" and values["part_length_m"] <= 0.0:
+        raise ValueError("track_end=stopper needs part_length_m > 0 (the queue's slot)")

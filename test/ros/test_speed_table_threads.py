@@ -15,6 +15,7 @@ import rclpy
 from rclpy.lifecycle import TransitionCallbackReturn
 from rclpy.parameter import Parameter
 
+import feeder_ros.drive.speed_model_source as speed_model_source
 import feeder_ros.nodes.drive_interface as drive_interface
 from feeder_ros.drive.speed_model import cached_speed_table
 
@@ -28,7 +29,7 @@ def test_speed_table_is_computed_with_a_core_left_free(
         seen.append(numba.get_num_threads())
         return cached_speed_table(*args, **kwargs)
 
-    monkeypatch.setattr(drive_interface, "cached_speed_table", recording)
+    monkeypatch.setattr(speed_model_source, "cached_speed_table", recording)
     threads_before = numba.get_num_threads()
     context = rclpy.Context()
     rclpy.init(context=context)
