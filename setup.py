@@ -32,7 +32,7 @@ setup(
     package_data={PACKAGE: ["py.typed"]},
     data_files=[
         (f"share/{PACKAGE}", ["package.xml"]),
-        (f"share/{PACKAGE}/config", glob("config/*.yaml")),
+        (f"share/{PACKAGE}/config", sorted(glob("config/*.yaml") + glob("config/*_layout.*"))),
         (f"share/{PACKAGE}/launch", glob("launch/*.launch.py")),
         ("share/ament_index/resource_index/packages", [f"resource/{PACKAGE}"]),
     ],
@@ -47,8 +47,17 @@ setup(
         "zstandard",
         "lz4",
         "pymodbus==3.16.1",
+        "foxglove-sdk",
     ],
-    extras_require={"test": ["pytest", "pytest-timeout", "rosbags", "mcap-ros2-support==0.6.0"]},
+    extras_require={
+        "test": [
+            "pytest",
+            "pytest-timeout",
+            "rosbags",
+            "mcap-ros2-support==0.6.0",
+            "websockets>=11.0",
+        ]
+    },
     entry_points={"console_scripts": CONSOLE_SCRIPTS},
     zip_safe=False,
 )

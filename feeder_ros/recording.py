@@ -1,4 +1,5 @@
-"""The rclpy recorder behind ``feeder record``: serialized messages from the graph into a bag.
+"""The rclpy recorder behind ``feeder record`` (and ``feeder view``): serialized messages from the
+graph into a bag (or a live view: any :class:`TopicSink`).
 
 Topics are discovered on the graph (every ``discovery_period_s``): all topics under a namespace
 (plus ``/diagnostics``), or an explicit list. Each is subscribed with ``raw=True`` (the CDR bytes
@@ -20,7 +21,7 @@ import time
 from collections.abc import Callable, Sequence
 from dataclasses import dataclass, field
 from pathlib import Path
-from typing import Any
+from typing import Any, Protocol
 
 import yaml
 from rclpy.duration import Duration
@@ -46,9 +47,13 @@ from feeder_ros.ros_compat import RosSession
 
 __all__ = [
     "IGNORED_TOPICS",
+    "Forwarded",
     "RecordingOptions",
     "RecordingSummary",
     "TopicRecorder",
+    "TopicSelection",
+    "TopicSink",
+    "forward",
     "offered_qos_yaml",
     "record",
     "selected",
@@ -61,22 +66,17 @@ _INFINITE_NS = 0x7FFF_FFFF_FFFF_FFFF
 
 
 @dataclass(frozen=True)
-class RecordingOptions:
-    """What to record and how to write it (see ``feeder record --help``)."""
+class TopicSelection:
+    """Which topics of the graph to take, and for how long (``feeder record``, ``feeder view``)."""
 
-    output: Path
     topics: tuple[str, ...] = ()  # explicit topic names; empty: everything under ``namespace``
     namespace: str = "/"
-    compression: str = "zstd"
-    chunk_size: int = 1 << 20
-    max_file_size: int = 0
-    max_file_duration_s: float = 0.0
     duration_s: float | None = None
     use_sim_time: bool = False
     discovery_period_s: float = 0.5
 
     def __post_init__(self) -> None:
-        """Refuse (``ValueError`` naming the value) what cannot be recorded: names that are not
+        """Refuse (``ValueError`` naming the value) what cannot be taken: names that are not
         ROS names (nothing would ever match them), a duration that is not positive."""
         try:
             validate_namespace(_namespace(self.namespace))
@@ -92,14 +92,43 @@ class RecordingOptions:
             raise ValueError(f"duration_s={self.duration_s!r} must be > 0 (None: until Ctrl-C)")
 
 
-@dataclass
-class RecordingSummary:
+@dataclass(frozen=True, kw_only=True)
+class RecordingOptions(TopicSelection):
+    """What to record and how to write it (see ``feeder record --help``)."""
+
     output: Path
-    counts: dict[str, int] = field(default_factory=dict)  # topic -> messages written
+    compression: str = "zstd"
+    chunk_size: int = 1 << 20
+    max_file_size: int = 0
+    max_file_duration_s: float = 0.0
+
+
+class TopicSink(Protocol):
+    """Where the forwarded topics go: a bag (:class:`~feeder_ros.bag.BagWriter`), a live view.
+    ``add_topic`` raises ``BagError``, ``OSError`` or ``ValueError`` for a topic it cannot take."""
+
+    def add_topic(self, name: str, type_name: str, offered_qos_profiles: str) -> None: ...
+
+    def write(self, topic: str, data: bytes, log_time_ns: int) -> None: ...
+
+    def close(self) -> None: ...
+
+
+@dataclass
+class Forwarded:
+    """What a :class:`TopicRecorder` took: messages per topic, their types, the topics left out
+    and why, and what stopped it."""
+
+    counts: dict[str, int] = field(default_factory=dict)  # topic -> messages forwarded
     types: dict[str, str] = field(default_factory=dict)
-    skipped: dict[str, str] = field(default_factory=dict)  # topic -> why it is not recorded
-    files: list[Path] = field(default_factory=list)
+    skipped: dict[str, str] = field(default_factory=dict)  # topic -> why it is not taken
     stopped_by: str = ""
+
+
+@dataclass(kw_only=True)
+class RecordingSummary(Forwarded):
+    output: Path
+    files: list[Path] = field(default_factory=list)
 
     def text(self) -> str:
         lines = [
@@ -116,8 +145,8 @@ def _namespace(ns: str) -> str:
     return ns
 
 
-def selected(name: str, options: RecordingOptions) -> bool:
-    """Whether a topic of the graph is recorded under ``options``."""
+def selected(name: str, options: TopicSelection) -> bool:
+    """Whether a topic of the graph is taken under ``options``."""
     if options.topics:
         wanted = {
             t if t.startswith("/") else f"{_namespace(options.namespace).rstrip('/')}/{t}"
@@ -183,18 +212,25 @@ def message_class(type_name: str) -> Any:
 
 
 class TopicRecorder(Node):
-    """Subscribes (raw) to the selected topics as they appear and writes what arrives."""
+    """Subscribes (raw) to the selected topics as they appear and hands what arrives to a sink."""
 
     def __init__(
-        self, writer: BagWriter, options: RecordingOptions, summary: RecordingSummary
+        self,
+        sink: TopicSink,
+        options: TopicSelection,
+        summary: Forwarded,
+        node_name: str = "feeder_recorder",
+        verb: str = "recording",
     ) -> None:
+        """``verb``: what the log lines say is done with a topic ("recording", "serving")."""
         super().__init__(
-            "feeder_recorder",
+            node_name,
             parameter_overrides=[Parameter("use_sim_time", value=options.use_sim_time)],
         )
-        self._writer = writer
+        self._sink = sink
         self._options = options
         self._summary = summary
+        self._verb = verb
         self.discover()
         self.create_timer(options.discovery_period_s, self.discover)
 
@@ -214,24 +250,24 @@ class TopicRecorder(Node):
                 continue  # only subscribers so far: wait for a publisher (and its QoS)
             try:
                 cls = message_class(types[0])
-                self._writer.add_topic(name, types[0], offered_qos_yaml(publishers))
-            except (ImportError, AttributeError, BagError, OSError) as error:
-                self._skip(name, f"cannot record type {types[0]}: {error}")
+                self._sink.add_topic(name, types[0], offered_qos_yaml(publishers))
+            except (ImportError, AttributeError, BagError, OSError, ValueError) as error:
+                self._skip(name, f"cannot take type {types[0]}: {error}")
                 continue
             self._summary.counts[name] = 0
             self._summary.types[name] = types[0]
             self.create_subscription(
                 cls, name, self._callback(name), subscription_qos(publishers), raw=True
             )
-            self.get_logger().info(f"recording {name} ({types[0]})")
+            self.get_logger().info(f"{self._verb} {name} ({types[0]})")
 
     def _skip(self, name: str, why: str) -> None:
         self._summary.skipped[name] = why
-        self.get_logger().warning(f"not recording {name}: {why}")
+        self.get_logger().warning(f"not {self._verb} {name}: {why}")
 
     def _callback(self, topic: str) -> Callable[[bytes], None]:
         counts = self._summary.counts
-        write = self._writer.write
+        write = self._sink.write
         clock = self.get_clock()
 
         def on_message(data: bytes) -> None:
@@ -246,10 +282,9 @@ def record(
     args: Sequence[str] | None = None,
     on_ready: Callable[[], None] | None = None,
 ) -> RecordingSummary:
-    """Record until Ctrl-C, SIGTERM or ``options.duration_s``; the bag is closed in every case,
-    before the middleware's teardown (a teardown that hangs ends the process after
-    ``runner.TEARDOWN_LIMIT_S`` with status 1, the bag complete). Raises ``BagError`` if the bag
-    cannot be created (e.g. the output directory exists)."""
+    """Record until Ctrl-C, SIGTERM or ``options.duration_s``; the bag is closed in every case
+    (:func:`forward`). Raises ``BagError`` if the bag cannot be created (e.g. the output
+    directory exists)."""
     writer = BagWriter(
         options.output,
         compression=options.compression,
@@ -257,11 +292,28 @@ def record(
         max_file_size=options.max_file_size,
         max_file_duration_ns=int(options.max_file_duration_s * 1e9),
     )
-    summary = RecordingSummary(options.output)
+    summary = RecordingSummary(output=options.output)
+    forward(writer, options, summary, ("feeder_recorder", "recording"), args, on_ready)
+    summary.files = writer.files
+    return summary
+
+
+def forward(
+    sink: TopicSink,
+    options: TopicSelection,
+    summary: Forwarded,
+    name_and_verb: tuple[str, str],
+    args: Sequence[str] | None = None,
+    on_ready: Callable[[], None] | None = None,
+) -> None:
+    """Hand the selected topics to ``sink`` until Ctrl-C, SIGTERM or ``options.duration_s``
+    (``name_and_verb``: the forwarding node's name and the verb of its log lines). ``sink`` is
+    closed in every case, before the middleware's teardown (a teardown that hangs
+    ends the process after ``runner.TEARDOWN_LIMIT_S`` with status 1, the sink closed)."""
     try:
         with RosSession(args=list(args) if args is not None else None) as init:
             context = init.context
-            node = TopicRecorder(writer, options, summary)
+            node = TopicRecorder(sink, options, summary, *name_and_verb)
             executor = SingleThreadedExecutor(context=context)
             executor.add_node(node)
             if on_ready is not None:
@@ -283,10 +335,10 @@ def record(
             finally:
                 executor.remove_node(node)
                 try:
-                    # no callback writes once the loop has stopped: the bag is complete before
+                    # no callback writes once the loop has stopped: the sink is complete before
                     # the middleware's teardown, which the watchdog bounds (a Fast DDS teardown
                     # once spun for good; see runner.TEARDOWN_LIMIT_S)
-                    writer.close()
+                    sink.close()
                 finally:
                     faulthandler.dump_traceback_later(runner.TEARDOWN_LIMIT_S, exit=True)
                     node.destroy_node()
@@ -294,6 +346,4 @@ def record(
         summary.stopped_by = "signal"
     finally:
         faulthandler.cancel_dump_traceback_later()
-        writer.close()
-    summary.files = writer.files
-    return summary
+        sink.close()

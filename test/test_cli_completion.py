@@ -90,8 +90,8 @@ def test_sub_commands(script: Path) -> None:
     ("line", "expected"),
     [
         ("feeder record --c", ["--chunk-size", "--compression"]),
-        ("feeder cell --", ["--composed", "--config", "--duration", "--help", "--list",
-                            "--params-out"]),
+        ("feeder cell --", ["--composed", "--config", "--duration", "--foxglove", "--help",
+                            "--list", "--params-out"]),
         ("feeder info --", ["--help", "--json", "--verify"]),
         ("feeder sim --duration 2 --p", ["--parts", "--plot", "--preset", "--progress"]),
         ("feeder identify --source live --no-", ["--no-fit", "--no-lifecycle"]),

@@ -14,8 +14,6 @@ import signal
 import subprocess
 import sys
 import time
-from collections.abc import Iterator
-from contextlib import contextmanager
 from pathlib import Path
 from typing import Any
 
@@ -30,20 +28,19 @@ from bag.test_analysis import (
 )
 from mcap.reader import make_reader
 from mcap_ros2.decoder import DecoderFactory
-from rclpy.node import Node
 from rclpy.qos import QoSProfile, ReliabilityPolicy
 from rclpy.serialization import deserialize_message
 from ros_test_tools import probe_node, running, wait_until
 from rosbags.rosbag2 import Reader as RosbagsReader
+from simulator_process import drive, simulator
 from stuck_code import TEARDOWN_TIMEOUT_TEXT, stuck_teardown_script
 
 from feeder_ros.bag import Bag, BagWarning, bag_info
 from feeder_ros.cli.main import main
-from feeder_ros.msg import CarrierState, DriveCommand, PartStateArray
+from feeder_ros.msg import CarrierState, PartStateArray
 
 BIN = Path(sys.executable).parent
 FEEDER = str(BIN / "feeder")
-SIMULATOR = str(BIN / "platform_simulator")
 RELIABLE = QoSProfile(depth=1000, reliability=ReliabilityPolicy.RELIABLE)
 STATE_PERIOD_NS = 4_000_000  # state_rate_hz = 250
 
@@ -51,34 +48,6 @@ STATE_PERIOD_NS = 4_000_000  # state_rate_hz = 250
 def stamp_ns(message: Any) -> int:
     stamp = message.header.stamp  # rclpy or mcap-ros2-support message
     return int(stamp.sec) * 1_000_000_000 + int(stamp.nanosec)
-
-
-@contextmanager
-def simulator(ns: str) -> Iterator[subprocess.Popen[str]]:
-    command = [
-        SIMULATOR, "--ros-args", "-r", f"__ns:={ns}",
-        "-p", "state_rate_hz:=250.0", "-p", "imu_rate_hz:=250.0", "-p", "parts_rate_hz:=50.0",
-        "-p", "damping_ns_per_m:=30.0",
-        # no command watchdog: these tests are about recording, and on a loaded machine a
-        # command may reach the simulator late (the watchdog has its own simulator test)
-        "-p", "command_timeout_s:=0.0",
-    ]  # fmt: skip
-    with running(command) as process:
-        yield process
-    assert process.returncode == 0
-
-
-def drive(node: Node, ns: str, frequency_hz: float, amplitude_n: float) -> Any:
-    """A callback publishing the drive command, stamped now (a timer repeats it until the
-    simulator has been discovered)."""
-    publisher = node.create_publisher(DriveCommand, f"{ns}/drive/command", 10)
-
-    def send() -> None:
-        message = DriveCommand(enabled=True, frequency_hz=frequency_hz, amplitude_n=amplitude_n)
-        message.header.stamp = node.get_clock().now().to_msg()
-        publisher.publish(message)
-
-    return send
 
 
 def newest_stamps(bag: Path, types: dict[str, Any]) -> dict[str, int]:

@@ -1,7 +1,8 @@
 """Ctrl-C and ``feeder``'s exit status, on real processes.
 
-``feeder cell`` and ``feeder record`` run until stopped: Ctrl-C is their normal end, exit status 0
-once the nodes are stopped / the bag is closed (readable). A command whose work Ctrl-C cuts short
+``feeder cell``, ``feeder record`` and ``feeder view`` run until stopped: Ctrl-C is their normal
+end, exit status 0 once the nodes are stopped / the bag (readable) or the server is closed. A
+command whose work Ctrl-C cuts short
 (``feeder sim`` mid-run) exits 130. Ctrl-C is sent as a terminal sends it: SIGINT to the whole
 process group (the command and the nodes it started). DDS is isolated by conftest (the session's
 own ROS_DOMAIN_ID, discovery on localhost only), which every process here inherits.
@@ -170,3 +171,22 @@ def test_ctrl_c_in_the_middle_of_a_simulation_is_exit_status_130(tmp_path: Path)
             os.killpg(sim.pid, signal.SIGKILL)
             sim.wait()
         sim.stderr.close()
+
+
+def test_ctrl_c_ends_a_cell_and_its_live_view_with_exit_status_0(tmp_path: Path) -> None:
+    # the terminal signals the whole group: the cell, its nodes and its `feeder view` at once
+    cell = _start("cell", "--config", str(_one_feeder(tmp_path)), "--foxglove", "0")
+    try:
+        assert wait_until(lambda: "serving the live view on" in cell.output(), 60.0), cell.output()[
+            -3000:
+        ]
+        children = _children(cell.pid)
+        assert len(children) == 3  # two nodes and the view
+        assert _ctrl_c(cell) == 0, cell.output()[-3000:]
+        output = cell.output()
+        assert "[cell] stopping" in output
+        assert "stopped by signal" in output  # the view's summary
+        assert "Traceback" not in output
+        assert wait_until(lambda: not any(_alive(pid) for pid in children), 30.0)
+    finally:
+        _stop(cell)

@@ -21,14 +21,16 @@ import subprocess
 import sys
 import tempfile
 import time
+from collections.abc import Sequence
 from pathlib import Path
 from typing import Any
 
 from feeder_ros.atomic_files import atomic_text
-from feeder_ros.cell import CellDescription, CellError, NodeLaunch, load_cell, parameters_document
+from feeder_ros.cell import CellDescription, CellError, load_cell, parameters_document
 from feeder_ros.cli.arguments import positive_float
 from feeder_ros.cli.main import CommandError
 from feeder_ros.cli.outputs import check_output_file, output_path
+from feeder_ros.cli.view import DEFAULT_PORT, port_number
 
 HELP = "start a feeder cell (all its nodes) from a cell description; Ctrl-C stops it"
 EPILOG = """\
@@ -38,9 +40,15 @@ stuck in the middleware ends the process after 10 s): exit status 1. A node that
 stops the cell: exit status 1. A Ctrl-C before the cell starts (its '[cell] NAME: N nodes' line)
 cuts the command short: exit status 130.
 
+--foxglove runs 'feeder view' beside the nodes (its own process): every topic of the cell on
+ws://127.0.0.1:8765 (or PORT) for Foxglove; if it cannot start (the port taken), the cell stops
+with exit status 1.
+
 examples:
   # the demo cell of config/cell.yaml, each node its own process, until Ctrl-C
   feeder cell
+  # the same with its live view for Foxglove on ws://127.0.0.1:8765
+  feeder cell --foxglove
   # every node in this one process, for one minute
   feeder cell --composed --duration 60
   # the nodes' command lines, their parameters written to parameters.yaml
@@ -93,6 +101,15 @@ def add_arguments(parser: argparse.ArgumentParser) -> None:
         help="stop after this many seconds (default: until Ctrl-C)",
     )
     parser.add_argument(
+        "--foxglove",
+        nargs="?",
+        const=DEFAULT_PORT,
+        type=port_number,
+        metavar="PORT",
+        help=f"also serve the cell's topics live to Foxglove on ws://127.0.0.1:PORT (default "
+        f"{DEFAULT_PORT}; see feeder view --help)",
+    )
+    parser.add_argument(
         "--list",
         action="store_true",
         help="print each node's command line and the cell's parameters (YAML), then exit",
@@ -110,52 +127,73 @@ def _die_with_parent() -> None:  # runs in the child between fork and exec
     libc.prctl(_PR_SET_PDEATHSIG, signal.SIGTERM)
 
 
-def run_processes(cell: CellDescription, parameters_file: Path, duration: float | None) -> int:
-    processes: list[tuple[NodeLaunch, subprocess.Popen[bytes]]] = []
+Children = list[tuple[str, "subprocess.Popen[bytes]"]]  # (name in messages, process)
+Extras = Sequence[tuple[str, list[str]]]  # processes beside the nodes: (name, command line)
+
+
+def _start(name: str, command: list[str], children: Children) -> None:
+    print(f"[cell] starting {name}", flush=True)
+    children.append((name, subprocess.Popen(command, preexec_fn=_die_with_parent)))
+
+
+def _one_exited(children: Children) -> bool:
+    """Whether a child has exited by itself (said on stdout): the cell then stops."""
+    for name, process in children:
+        code = process.poll()
+        if code is not None:
+            print(f"[cell] {name} exited with {code}: stopping the cell", flush=True)
+            return True
+    return False
+
+
+def run_processes(
+    cell: CellDescription, parameters_file: Path, duration: float | None, extras: Extras = ()
+) -> int:
+    children: Children = []
     previous = signal.signal(signal.SIGTERM, signal.default_int_handler)  # like Ctrl-C
     status = 0
     try:
         for node in cell.nodes:
             command = [str(executable_path(node.executable)), *node.ros_arguments(parameters_file)]
-            print(f"[cell] starting {node.fully_qualified_name}", flush=True)
-            processes.append((node, subprocess.Popen(command, preexec_fn=_die_with_parent)))
+            _start(node.fully_qualified_name, command, children)
+        for name, command in extras:
+            _start(name, command, children)
         deadline = None if duration is None else time.monotonic() + duration
         while deadline is None or time.monotonic() < deadline:
-            for node, process in processes:
-                code = process.poll()
-                if code is not None:
-                    print(
-                        f"[cell] {node.fully_qualified_name} exited with {code}: stopping the cell",
-                        flush=True,
-                    )
-                    return 1
+            if _one_exited(children):
+                return 1
             time.sleep(0.2)
     except KeyboardInterrupt:
         print("[cell] stopping", flush=True)
     finally:
-        status = max(status, _stop_all(processes))
+        status = max(status, _stop_all(children))
         signal.signal(signal.SIGTERM, previous)
     return status
 
 
-def _stop_all(processes: list[tuple[NodeLaunch, subprocess.Popen[bytes]]]) -> int:
-    for _, process in processes:
+def _stop_all(children: Children) -> int:
+    for _, process in children:
         if process.poll() is None:
             process.send_signal(signal.SIGINT)
     deadline = time.monotonic() + 10.0
     status = 0
-    for node, process in processes:
+    for name, process in children:
         try:
             process.wait(timeout=max(deadline - time.monotonic(), 0.1))
         except subprocess.TimeoutExpired:
-            print(f"[cell] {node.fully_qualified_name} did not stop: killed", flush=True)
+            print(f"[cell] {name} did not stop: killed", flush=True)
             process.kill()
             process.wait()
             status = 1
     return status
 
 
-def run_composed(cell: CellDescription, parameters_file: Path, duration: float | None) -> int:
+def run_composed(
+    cell: CellDescription, parameters_file: Path, duration: float | None, extras: Extras = ()
+) -> int:
+    """The nodes in this process; ``extras`` (the live view) as child processes beside them."""
+    children: Children = []
+    status = 0
     try:
         # the imports take seconds (rclpy, the nodes' modules): a Ctrl-C meanwhile stops the
         # cell as it does once the nodes run (nothing started yet to stop), exit status 0
@@ -172,9 +210,12 @@ def run_composed(cell: CellDescription, parameters_file: Path, duration: float |
             executable: importlib.import_module(modules[executable]).NODE_CLASS
             for executable in {launch.executable for launch in cell.nodes}
         }
+        for name, command in extras:
+            _start(name, command, children)
         try:
             with RosSession() as init, StopOnShutdown(init.context):
-                _spin_composed(cell, classes, parameters_file, duration)
+                if _spin_composed(cell, classes, parameters_file, duration, children):
+                    status = 1
         except ExternalShutdownException:
             pass
     except KeyboardInterrupt:
@@ -184,13 +225,19 @@ def run_composed(cell: CellDescription, parameters_file: Path, duration: float |
         pass
     finally:
         faulthandler.cancel_dump_traceback_later()  # armed for the nodes' teardown
+        status = max(status, _stop_all(children))
     print("[cell] stopped", flush=True)
-    return 0
+    return status
 
 
 def _spin_composed(
-    cell: CellDescription, classes: dict[str, Any], parameters_file: Path, duration: float | None
-) -> None:
+    cell: CellDescription,
+    classes: dict[str, Any],
+    parameters_file: Path,
+    duration: float | None,
+    children: Children,
+) -> bool:
+    """Spin the nodes until ``duration`` ends; True if a child process exited by itself."""
     from rclpy.executors import SingleThreadedExecutor
 
     from feeder_ros.nodes import runner
@@ -209,6 +256,9 @@ def _spin_composed(
         deadline = None if duration is None else time.monotonic() + duration
         while deadline is None or time.monotonic() < deadline:
             executor.spin_once(timeout_sec=0.1)
+            if _one_exited(children):
+                return True
+        return False
     finally:
         # wait for callbacks in flight and end the executor's worker threads (left running, they
         # are joined at interpreter exit, and one stuck in a callback kept the process alive)
@@ -263,4 +313,12 @@ def run(args: argparse.Namespace) -> int:
             flush=True,  # from this line on, Ctrl-C is the cell's normal stop (exit status 0)
         )
         runner = run_composed if args.composed else run_processes
-        return runner(cell, parameters_file, args.duration)
+        return runner(cell, parameters_file, args.duration, _extras(args))
+
+
+def _extras(args: argparse.Namespace) -> Extras:
+    """The live view (``--foxglove``): ``feeder view`` of every topic, a process of its own."""
+    if args.foxglove is None:
+        return ()
+    view = [sys.executable, "-m", "feeder_ros.cli.main", "view", "--port", str(args.foxglove)]
+    return [("live view", view)]

@@ -15,9 +15,9 @@ Errors the user can fix (bad parameters, unreadable files) are raised as :class:
 Bare ``feeder`` prints the help on stdout and exits 0 (as ``ros2``, ``git`` or ``pip`` without a
 command show what there is), ``feeder --version`` the version. Ctrl-C: a command whose work is
 cut short by it (``feeder sim`` mid-run, ``feeder analyze``, a sweep) exits 130 (128 + SIGINT,
-what a shell reports for a command killed by Ctrl-C); ``feeder cell`` and ``feeder record``,
-which run until stopped, take Ctrl-C as their normal end and exit 0 once the cell's nodes are
-stopped or the bag is closed (their ``--help`` says so).
+what a shell reports for a command killed by Ctrl-C); ``feeder cell``, ``feeder record`` and
+``feeder view``, which run until stopped, take Ctrl-C as their normal end and exit 0 once the
+cell's nodes are stopped, the bag or the server closed (their ``--help`` says so).
 """
 
 from __future__ import annotations
@@ -39,6 +39,7 @@ SUBCOMMANDS: dict[str, str] = {
     "sim": "feeder_ros.cli.sim",
     "cell": "feeder_ros.cli.cell",
     "record": "feeder_ros.cli.record",
+    "view": "feeder_ros.cli.view",
     "analyze": "feeder_ros.cli.analyze",
     "info": "feeder_ros.cli.info",
     "reindex": "feeder_ros.cli.reindex",
@@ -66,8 +67,8 @@ Run 'feeder COMMAND --help' for a command's options and examples.
 
 Exit status: 0 done; 1 the work failed or is incomplete (a simulation failed, a bag lost data, a
 node died: the command says what); 2 bad usage or input; 130 interrupted by Ctrl-C before the
-work was done. 'feeder cell' and 'feeder record' run until Ctrl-C (or SIGTERM), their normal end:
-exit status 0 once the nodes are stopped or the bag is closed."""
+work was done. 'feeder cell', 'feeder record' and 'feeder view' run until Ctrl-C (or SIGTERM),
+their normal end: exit status 0 once the nodes are stopped, the bag or the server closed."""
 
 
 class CommandError(Exception):
@@ -160,8 +161,9 @@ def main(argv: Sequence[str] | None = None) -> int:
     try:
         return _main(argv)
     except KeyboardInterrupt:
-        # Ctrl-C cut the command short (while it loaded, or mid-run); ``feeder cell`` and
-        # ``feeder record`` handle it themselves once started: for them it is the normal end
+        # Ctrl-C cut the command short (while it loaded, or mid-run); ``feeder cell``,
+        # ``feeder record`` and ``feeder view`` handle it themselves once started: for them it
+        # is the normal end
         print("feeder: interrupted", file=sys.stderr)
         return INTERRUPTED
 
