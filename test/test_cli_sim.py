@@ -211,3 +211,26 @@ def test_an_unknown_option_is_named_by_the_sub_command(capsys: pytest.CaptureFix
     err = capsys.readouterr().err
     assert "usage: feeder sim" in err
     assert "feeder sim: error: unrecognized arguments: --bogus" in err
+
+
+def test_the_default_run_says_the_part_never_slips_and_how_to_see_slip(
+    capsys: pytest.CaptureFixture[str],
+) -> None:
+    assert main(["sim"]) == 0
+    out = capsys.readouterr().out
+    assert "no part ever slipped: the carrier's peak acceleration" in out
+    assert "To see slip, drive harder (about --set drive_amplitude_n=" in out
+
+
+def test_a_likely_unit_mistake_is_warned_and_the_run_still_made(
+    capsys: pytest.CaptureFixture[str],
+) -> None:
+    assert main(["sim", "--duration", "0.2", "--set", "drive_frequency_hz=600"]) == 0
+    captured = capsys.readouterr()
+    assert (
+        "feeder sim: warning: drive_frequency_hz=600 is 18x the carrier's highest" in captured.err
+    )
+    assert (
+        "feeder sim: warning: drive_frequency_hz=600 is above half the output rate" in captured.err
+    )
+    assert "f_d = 600 Hz" in captured.out

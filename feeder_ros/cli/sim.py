@@ -38,6 +38,7 @@ from feeder_ros.cli.outputs import (
 from feeder_ros.cli.progress import ProgressBar
 from feeder_ros.nodes.platform_simulator_parameters import NODE_PARAMETERS
 from feeder_ros.physics.parameters import FeederParameters, ParameterError, parse_parameter_value
+from feeder_ros.physics.run_checks import likely_unit_mistakes, no_slip_note
 from feeder_ros.yaml_files import YamlFileError, read_yaml
 
 if TYPE_CHECKING:
@@ -346,6 +347,8 @@ def run(args: argparse.Namespace) -> int:
     report = report_stream([("--output", args.output), ("--events", args.events)])
     params, _, _ = plant_from_arguments(args)
     parts = default_parts(params, args.parts)
+    for warning in likely_unit_mistakes(params, args.rate):
+        print(f"feeder sim: warning: {warning}", file=sys.stderr)
     _check_sample_memory(args.duration, args.rate, len(parts))
     show = bool(args.progress) or (sys.stderr.isatty() and args.duration >= 10.0)
     progress = ProgressBar("simulating", args.duration, show, unit="sim s")
@@ -416,6 +419,8 @@ def summary(
             f"{speed * 1e3:.4g} mm/s, slip fraction {slip:.3f}, "
             + (f"part 0 first slips at {onset * 1e3:.3f} ms" if onset is not None else "no slip"),
         ]
+        if onset is None and slip == 0.0:
+            lines.append(no_slip_note(params, result.carrier_a_mps2))
     lines += [
         f"events: {len(result.event_t_s)}",
         f"simulation wall time {wall_s:.3g} s, real-time factor "
