@@ -48,6 +48,7 @@ setup(
         "lz4",
         "pymodbus==3.16.1",
         "foxglove-sdk",
+        "tqdm",
     ],
     extras_require={
         "test": [

@@ -1,28 +1,37 @@
-"""A one-line text progress bar on stderr, shared by the ``feeder`` sub-commands."""
+"""The ``feeder`` sub-commands' progress bar on stderr, drawn by ``tqdm``.
+
+:class:`ProgressBar` keeps the commands' calls simple (the work reports how far it is, not by how
+much it moved) and the line's content fixed: label, percentage, bar, then done/total in ``unit``,
+the elapsed time, the time left at the rate so far and the rate (a bar without a unit, over a
+fraction such as a file read, shows the times only). ``tqdm`` redraws at most ten times a second
+and fits the line to the terminal.
+"""
 
 from __future__ import annotations
 
 import math
 import sys
-import time
-from collections.abc import Callable
-from typing import TextIO
+from typing import Any, TextIO
+
+from tqdm import tqdm
 
 __all__ = ["ProgressBar"]
 
+_WITH_UNIT = (
+    "{desc} {percentage:3.0f}%|{bar}| {n:.3g}/{total:.3g}{unit} "
+    "[{elapsed}<{remaining}, {rate_noinv_fmt}]"
+)
+_FRACTION = "{desc} {percentage:3.0f}%|{bar}| [{elapsed}<{remaining}]"
+
 
 class ProgressBar:
-    """``ProgressBar(label, total, enabled)``; ``update(done)`` redraws only when the percentage
-    changes; ``relabel(label)`` starts a new line for a new item; ``close()`` ends the line.
+    """``ProgressBar(label, total, enabled)``; ``update(done)`` moves it to ``done`` of ``total``
+    (a NaN is ignored, values are clipped to ``0..total``); ``relabel(label)`` ends the line and
+    starts one for the next item; ``close()`` ends the line.
 
-    After the first second of an item the line also shows the time it has taken, the rate (in
-    ``unit`` per second, when a unit is given) and the time left at that rate (``ETA``).
-
-    Disabled bars do nothing, so callers need no conditionals (enable it when stderr is a TTY
-    or the user asked for ``--progress``).
+    A disabled bar writes nothing, so callers need no conditionals (enable it when stderr is a
+    TTY or the user asked for ``--progress``).
     """
-
-    WIDTH = 25
 
     def __init__(
         self,
@@ -31,68 +40,41 @@ class ProgressBar:
         enabled: bool,
         stream: TextIO | None = None,
         unit: str = "",
-        clock: Callable[[], float] = time.monotonic,
     ) -> None:
         self.label = label
         self.total = float(total)
         self.enabled = enabled
         self.unit = unit
-        self._stream = stream if stream is not None else sys.stderr
-        self._clock = clock
-        self._started = clock()
-        self._last = -1
-        self._drawn = False
-        self._width = 0  # of the line drawn last (a shorter one pads it out)
+        self._stream = stream
+        self._bar: Any = None
+        self._open()
+
+    def _open(self) -> None:
+        self._bar = tqdm(
+            total=self.total,
+            desc=self.label,
+            unit=f" {self.unit}" if self.unit else "it",  # " sim s": "1.3 sim s/s"
+            disable=not self.enabled,
+            file=self._stream if self._stream is not None else sys.stderr,
+            bar_format=_WITH_UNIT if self.unit else _FRACTION,
+            dynamic_ncols=True,
+            leave=True,
+        )
 
     def update(self, done: float) -> None:
-        if not self.enabled:
+        if not self.enabled or not math.isfinite(done):
             return
-        if not math.isfinite(done):
-            return
-        fraction = min(max(done / self.total, 0.0), 1.0) if self.total > 0 else 1.0
-        percent = int(100.0 * fraction)
-        if percent == self._last:
-            return
-        self._last = percent
-        bar = "#" * (percent * self.WIDTH // 100)
-        line = f"{self.label} [{bar:<{self.WIDTH}}] {percent:3d}%{self._timing(done, fraction)}"
-        self._stream.write(f"\r{line:<{self._width}}")
-        self._stream.flush()
-        self._width = len(line)
-        self._drawn = True
-
-    def _timing(self, done: float, fraction: float) -> str:
-        elapsed = self._clock() - self._started
-        if elapsed < 1.0:
-            return ""
-        text = f"  {_clock_text(elapsed)}"
-        if self.unit:
-            text += f", {done / elapsed:.3g} {self.unit}/s"
-        if 0.0 < fraction < 1.0:
-            text += f", ETA {_clock_text(elapsed * (1.0 - fraction) / fraction)}"
-        return text
+        done = min(max(float(done), 0.0), self.total)
+        if done != self._bar.n:
+            self._bar.update(done - self._bar.n)
 
     def relabel(self, label: str, total: float | None = None) -> None:
-        """Finish the current line (if drawn) and go on with another item."""
-        if self.enabled and self._drawn:
-            self._stream.write("\n")
+        """Finish the current line and go on with another item."""
+        self._bar.close()
         self.label = label
         if total is not None:
             self.total = float(total)
-        self._last = -1
-        self._drawn = False
-        self._width = 0
-        self._started = self._clock()
+        self._open()
 
     def close(self) -> None:
-        if self.enabled and self._drawn:
-            self._stream.write("\n")
-            self._stream.flush()
-        self._drawn = False
-
-
-def _clock_text(seconds: float) -> str:
-    """``m:ss`` (``h:mm:ss`` from an hour)."""
-    minutes, secs = divmod(round(seconds), 60)
-    hours, minutes = divmod(minutes, 60)
-    return f"{hours}:{minutes:02d}:{secs:02d}" if hours else f"{minutes}:{secs:02d}"
+        self._bar.close()
