@@ -1,5 +1,9 @@
 """Parse ROS 2 message definitions (.msg text and MCAP ``ros2msg`` schemas) into field lists.
 
+Each .msg text is parsed by ROS's own parser (``rosidl_adapter.parser``); this module splits a
+schema into its types and turns the parse into the flat :class:`Field` records the CDR decoder
+walks.
+
 A ``ros2msg`` schema is the .msg text of the top-level type followed by the text of every type it
 depends on, each introduced by a line of 80 ``=`` and a ``MSG: pkg/Type`` line. Type names are
 normalised to ``pkg/msg/Type``; ``pkg/Type`` and (inside a package) ``Type`` are accepted as well.
@@ -7,8 +11,17 @@ normalised to ``pkg/msg/Type``; ``pkg/Type`` and (inside a package) ``Type`` are
 
 from __future__ import annotations
 
+import contextlib
+import io
 import re
 from dataclasses import dataclass
+from typing import Any
+
+from rosidl_adapter.parser import (
+    InvalidSpecification,
+    is_valid_message_name,
+    parse_message_string,
+)
 
 from feeder_ros.bag.errors import MessageDefinitionError
 
@@ -43,8 +56,6 @@ PRIMITIVE_SIZES: dict[str, int] = {
     "float64": 8,
 }
 STRING_TYPES = frozenset({"string", "wstring"})
-
-_ARRAY_RE = re.compile(r"^(?P<base>[^\[\]]+)(?:\[(?P<bound><=)?(?P<size>\d*)\])?$")
 
 
 @dataclass(frozen=True)
@@ -98,55 +109,37 @@ def short_type(type_name: str) -> str:
     return f"{parts[0]}/{parts[2]}"
 
 
-def _strip_comment(line: str) -> str:
-    # A '#' inside a quoted default value is not a comment; constants are skipped anyway, so a
-    # simple scan that respects quotes is enough.
-    quote = ""
-    for i, ch in enumerate(line):
-        if quote:
-            if ch == quote:
-                quote = ""
-        elif ch in "\"'":
-            quote = ch
-        elif ch == "#":
-            return line[:i]
-    return line
-
-
-def _parse_field_type(type_name: str, token: str, package: str) -> tuple[str, str | None, int]:
-    match = _ARRAY_RE.match(token)
-    if match is None:
-        raise MessageDefinitionError(type_name, f"cannot parse field type {token!r}")
-    base = match["base"]
-    if "<=" in base:  # bounded string: string<=N
-        base = base.split("<=", 1)[0]
-    if base not in PRIMITIVE_SIZES and base not in STRING_TYPES:
-        base = normalize_type(base, package)
-    if match.group(0).endswith("]"):
-        if match["bound"] or not match["size"]:
-            return base, "seq", 0
-        return base, "fixed", int(match["size"])
-    return base, None, 0
+def _field(field: Any, package: str) -> Field:
+    """One field of rosidl_adapter's parse as ours: ``T[]`` and ``T[<=N]`` are both sequences."""
+    kind = field.type
+    base = kind.type if kind.is_primitive_type() else normalize_type(f"{kind.pkg_name}/{kind.type}")
+    if base not in PRIMITIVE_SIZES and base not in STRING_TYPES and "/" not in base:
+        base = normalize_type(base, package)  # e.g. ROS 1's time/duration: no such type here
+    if not kind.is_array:
+        return Field(field.name, base)
+    if kind.array_size is None or kind.is_upper_bound:
+        return Field(field.name, base, "seq")
+    return Field(field.name, base, "fixed", int(kind.array_size))
 
 
 def parse_msg_text(type_name: str, text: str) -> tuple[Field, ...]:
-    """Fields (constants dropped) of one .msg text; ``type_name`` resolves relative types."""
+    """Fields (constants dropped) of one .msg text, parsed by ROS's own ``rosidl_adapter``;
+    ``type_name`` resolves relative types. A text it refuses raises MessageDefinitionError
+    with its reason."""
     type_name = normalize_type(type_name)
     package = package_of(type_name)
-    fields: list[Field] = []
-    for raw in text.splitlines():
-        line = _strip_comment(raw).strip()
-        if not line:
-            continue
-        head = line.split("=", 1)[0].split()
-        if "=" in line and len(head) == 2:
-            continue  # constant: TYPE NAME=VALUE
-        tokens = line.split(None, 2)
-        if len(tokens) < 2:
-            raise MessageDefinitionError(type_name, f"cannot parse line {raw.strip()!r}")
-        base, array, count = _parse_field_type(type_name, tokens[0], package)
-        fields.append(Field(tokens[1], base, array, count))
-    return tuple(fields)
+    name = type_name.rsplit("/", 1)[-1]
+    # rosidl_adapter checks the type's own name (an action's FeedParts_FeedbackMessage fails
+    # it), which does not change the fields: such a name is parsed under a stand-in
+    if not is_valid_message_name(name):
+        name = "Message"
+    refused = io.StringIO()  # rosidl_adapter also prints its refusal: it goes into our error
+    try:
+        with contextlib.redirect_stderr(refused):
+            spec = parse_message_string(package, name, text)
+    except (InvalidSpecification, ValueError, TypeError, IndexError) as error:
+        raise MessageDefinitionError(type_name, str(error)) from None
+    return tuple(_field(field, package) for field in spec.fields)
 
 
 def parse_ros2msg_schema(type_name: str, schema_text: str) -> MsgDefs:
