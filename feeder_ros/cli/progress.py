@@ -18,7 +18,7 @@ from tqdm import tqdm
 __all__ = ["ProgressBar"]
 
 _WITH_UNIT = (
-    "{desc} {percentage:3.0f}%|{bar}| {n:.3g}/{total:.3g}{unit} "
+    "{desc} {percentage:3.0f}%|{bar}| {n:,.6g}/{total:,.6g}{unit} "
     "[{elapsed}<{remaining}, {rate_noinv_fmt}]"
 )
 _FRACTION = "{desc} {percentage:3.0f}%|{bar}| [{elapsed}<{remaining}]"
