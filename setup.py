@@ -43,7 +43,7 @@ setup(
         "numba",
         "pyyaml",
         "matplotlib",
-        "mcap",
+        "mcap>=1.6.0",
         "zstandard",
         "lz4",
         "pymodbus==3.16.1",

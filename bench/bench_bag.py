@@ -389,10 +389,10 @@ def main() -> int:
     args.cache.mkdir(parents=True, exist_ok=True)
 
     decode_bag = _cached(
-        args.cache, f"decode_{n_decode}", f"v1 {n_decode}", lambda p: write_decode_bag(p, n_decode)
+        args.cache, f"decode_{n_decode}", f"v2 {n_decode}", lambda p: write_decode_bag(p, n_decode)
     )
     hour_bag = _cached(
-        args.cache, f"hour_{hour_s}", f"v1 {hour_s}", lambda p: write_hour_bag(p, hour_s)
+        args.cache, f"hour_{hour_s}", f"v2 {hour_s}", lambda p: write_hour_bag(p, hour_s)
     )
     size_mb = sum(f.stat().st_size for f in decode_bag.glob("*.mcap")) / 1e6
     hour_mb = sum(f.stat().st_size for f in hour_bag.glob("*.mcap")) / 1e6

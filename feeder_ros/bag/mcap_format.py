@@ -1,23 +1,11 @@
-"""MCAP record layout shared by the writer and the reader (https://mcap.dev/spec).
-
-Every record is ``opcode:uint8, length:uint64, content``; integers are little endian; a string is a
-``uint32`` byte length and UTF-8; a map is a ``uint32`` byte length and its key/value pairs.
+"""MCAP record opcodes and magic (https://mcap.dev/spec) for the damage scan and reindex, which
+read files record by record where ``mcap``'s reader stops at the first damage. (Plain ints, not
+``mcap.opcode.Opcode``: the scan compares one per record.) Files are written by ``mcap``'s writer.
 """
 
 from __future__ import annotations
 
-import struct
-from collections.abc import Mapping
-
-__all__ = [
-    "MAGIC",
-    "MESSAGE_HEADER",
-    "Op",
-    "encode_map",
-    "encode_record",
-    "encode_str",
-    "encode_u16_u64_map",
-]
+__all__ = ["MAGIC", "Op"]
 
 MAGIC = b"\x89MCAP0\r\n"
 
@@ -38,28 +26,3 @@ class Op:
     METADATA_INDEX = 0x0D
     SUMMARY_OFFSET = 0x0E
     DATA_END = 0x0F
-
-
-# opcode, record length, channel id, sequence, log time, publish time; the data follows.
-MESSAGE_HEADER = struct.Struct("<BQHIQQ")
-MESSAGE_FIXED = 22  # content bytes before the data
-RECORD_HEADER = struct.Struct("<BQ")
-
-
-def encode_str(text: str) -> bytes:
-    raw = text.encode("utf-8")
-    return struct.pack("<I", len(raw)) + raw
-
-
-def encode_map(values: Mapping[str, str]) -> bytes:
-    body = b"".join(encode_str(k) + encode_str(v) for k, v in values.items())
-    return struct.pack("<I", len(body)) + body
-
-
-def encode_u16_u64_map(values: Mapping[int, int]) -> bytes:
-    body = b"".join(struct.pack("<HQ", k, v) for k, v in values.items())
-    return struct.pack("<I", len(body)) + body
-
-
-def encode_record(opcode: int, content: bytes) -> bytes:
-    return RECORD_HEADER.pack(opcode, len(content)) + content

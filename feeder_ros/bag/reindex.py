@@ -103,7 +103,7 @@ def _finish(path: Path, bag: Bag, compression: str, meta_text: str, distro: str)
     only the indexes), the file is left as it is instead."""
     tmp = path.with_name(path.name + ".reindex")
     tmp.unlink(missing_ok=True)
-    out = _McapFile(tmp, compression, 3)
+    out = _McapFile(tmp, compression, 1 << 20)
     damage: set[str] = set()
 
     def report(problem: BagProblem) -> None:
@@ -122,8 +122,6 @@ def _finish(path: Path, bag: Bag, compression: str, meta_text: str, distro: str)
                     channel = out.add_channel(_topic_of(scan.channels[cid]))
                     channels[cid] = channel
                 out.add_message(channel, data, log, pub)
-                if len(out.chunk) >= 1 << 20:
-                    out.finish_chunk()
         out.close(meta_text, distro)
     except BaseException:
         out.stream.close()

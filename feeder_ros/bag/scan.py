@@ -254,6 +254,10 @@ class FileScan:
         if f.read(8) != MAGIC:
             self._problem("not_mcap", "the file does not start with the MCAP magic", 0)
             return
+        # a complete file's summary lists every schema and channel: with them known from the
+        # start, a chunk of unwanted topics is skipped on its indexes even when it is the chunk
+        # that holds the channel records (mcap's writer puts them in the first chunk they need)
+        self._resync(f, size, 0)
         pending: _PendingChunk | None = None
         loose = bytearray()
         loose_offset = 0

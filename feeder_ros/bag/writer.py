@@ -2,44 +2,33 @@
 
 The bag is a directory ``<name>/`` with ``metadata.yaml`` (rosbag2 ``version: 9``) and the MCAP
 files ``<name>_0.mcap``, ``<name>_1.mcap``, ... (profile ``ros2``, ``ros2msg`` schemas with every
-dependent definition, ``cdr`` messages, channel metadata ``offered_qos_profiles``). Messages are
-collected in chunks (zstd, lz4 or uncompressed), each followed by its message indexes; the summary,
-the ``rosbag2`` metadata record and the footer are written when a file is closed.
+dependent definition, ``cdr`` messages, channel metadata ``offered_qos_profiles``), written by the
+``mcap`` library's writer: messages in chunks (zstd, lz4 or uncompressed) with CRCs, each followed
+by its message indexes; the summary, the ``rosbag2`` metadata record and the footer when a file is
+closed. What ``mcap`` does not do is here: rosbag2's directory, metadata and splitting, and the
+crash safety below.
 
-Crash safety: every finished chunk is written with its indexes in one ``write`` and flushed to the
-operating system, and ``metadata.yaml`` is written when the bag starts and rewritten (temp file +
-rename) on each split and on ``close``. A writer killed with SIGKILL leaves every complete chunk on
-disk; the reader reports the last file as cut short and reads it up to its last complete chunk.
-Chunks are not fsynced: data in the page cache survives a killed process, not a power cut.
+Crash safety: every finished chunk and its indexes are handed to the operating system as they are
+written (no Python buffer), and ``metadata.yaml`` is written when the bag starts and rewritten
+(temp file + rename) on each split and on ``close``. A writer killed with SIGKILL leaves every
+complete chunk on disk; the reader reports the last file as cut short and reads it up to its last
+complete chunk. Chunks are not fsynced: data in the page cache survives a killed process, not a
+power cut.
 """
 
 from __future__ import annotations
 
+import io
 import os
-import struct
-import zlib
-from array import array
-from dataclasses import dataclass, field
+from dataclasses import dataclass
 from pathlib import Path
 from types import TracebackType
-from typing import Any, BinaryIO
+from typing import IO, Any, cast
 
-import lz4.frame  # type: ignore[import-untyped]
-import numpy as np
 import yaml
-import zstandard
+from mcap.writer import CompressionType, Writer
 
 from feeder_ros.bag.errors import WriterStateError
-from feeder_ros.bag.mcap_format import (
-    MAGIC,
-    MESSAGE_FIXED,
-    MESSAGE_HEADER,
-    Op,
-    encode_map,
-    encode_record,
-    encode_str,
-    encode_u16_u64_map,
-)
 from feeder_ros.bag.msgdef import normalize_type
 from feeder_ros.bag.schemas import ros2msg_schema, type_description_hash
 from feeder_ros.ros_compat import ros_distro as ros_distro_in_use
@@ -49,6 +38,11 @@ __all__ = ["COMPRESSIONS", "METADATA_VERSION", "BagWriter", "default_qos_yaml"]
 METADATA_VERSION = 9
 COMPRESSIONS = ("zstd", "lz4", "none")
 LIBRARY = "feeder_ros.bag"
+_COMPRESSION = {
+    "zstd": CompressionType.ZSTD,
+    "lz4": CompressionType.LZ4,
+    "none": CompressionType.NONE,
+}
 _INFINITE = {
     "sec": 9223372036,
     "nsec": 854775807,
@@ -95,202 +89,109 @@ class _FileStats:
 class _Channel:
     id: int
     topic: _Topic
-    index: array[int] = field(default_factory=lambda: array("Q"))  # (log_time, offset) pairs
-    count: int = 0  # messages in the current file
     sequence: int = 0
 
 
-class _McapFile:
-    """One MCAP file being written: data section, chunks, indexes, summary."""
+class _DirectFile(io.BufferedIOBase):
+    """A new file whose every ``write`` goes to the operating system at once (no Python buffer):
+    ``mcap``'s writer hands over each finished chunk, then its message indexes, as whole writes,
+    so a killed recorder leaves every finished chunk on disk (up to the page cache)."""
 
-    def __init__(self, path: Path, compression: str, level: int) -> None:
+    def __init__(self, path: Path) -> None:
+        super().__init__()
+        self._raw = open(path, "xb", buffering=0)  # noqa: SIM115 - closed in close()
+        self.size = 0
+
+    def writable(self) -> bool:
+        return True
+
+    def write(self, data: Any) -> int:
+        view = memoryview(data).cast("B")
+        done = 0
+        while done < len(view):
+            done += self._raw.write(view[done:]) or 0
+        self.size += done
+        return done
+
+    def tell(self) -> int:
+        return self.size
+
+    def flush(self) -> None:
+        pass  # nothing is held here
+
+    def close(self) -> None:
+        if not self.closed:
+            self._raw.close()
+        super().close()
+
+
+class _McapFile:
+    """One MCAP file being written through ``mcap``'s :class:`~mcap.writer.Writer` (chunks of
+    ``chunk_size`` uncompressed bytes, message and chunk indexes, CRCs, statistics, summary); the
+    ``rosbag2`` metadata record and the footer are written by :meth:`close`.
+
+    ``mcap`` writes a channel's (and its schema's) record into the open chunk. A channel is
+    therefore registered with its first message, at the start of a new chunk, so that the chunk
+    holding its record also lists it in its message indexes: a reader skipping chunks by their
+    indexes (a cut file has no summary listing the channels) cannot skip the record. Channels
+    without a message are registered at :meth:`close` and listed in the summary."""
+
+    def __init__(self, path: Path, compression: str, chunk_size: int) -> None:
         self.path = path
-        self.compression = compression
-        self._zstd = (  # with a frame checksum, which readers verify far faster than the CRC
-            zstandard.ZstdCompressor(level=level, write_checksum=True)
-            if compression == "zstd"
-            else None
+        self.stream = _DirectFile(path)
+        self._writer = Writer(
+            cast(IO[Any], self.stream),  # a BufferedIOBase: mcap writes to it as it is
+            chunk_size=chunk_size,
+            compression=_COMPRESSION[compression],
         )
-        self.stream: BinaryIO = open(path, "xb")  # noqa: SIM115 - closed in close()
-        self.offset = 0
+        self._writer.start(profile="ros2", library=LIBRARY)
         self.schemas: dict[str, int] = {}
         self.channels: dict[str, _Channel] = {}  # by topic name (the latest channel of a name)
-        #: every channel (reindex copies a file where one name may have channels of two types)
-        self.all_channels: list[_Channel] = []
-        self.schema_records: list[bytes] = []
-        self.channel_records: list[bytes] = []
-        self.chunk_indexes: list[bytes] = []
-        self.metadata_indexes: list[bytes] = []
-        self.chunk = bytearray()
-        self.chunk_start = 0
-        self.chunk_end = 0
-        self.chunk_count = 0
-        self.message_count = 0
-        self.start_time: int | None = None
-        self.end_time = 0
-        self._write(MAGIC + encode_record(Op.HEADER, encode_str("ros2") + encode_str(LIBRARY)))
+        self._unregistered: list[_Channel] = []
 
-    def _write(self, data: bytes) -> None:
-        self.stream.write(data)
-        self.offset += len(data)
+    @property
+    def size(self) -> int:
+        """Bytes written so far (finished chunks and their indexes)."""
+        return self.stream.size
 
     def add_channel(self, topic: _Topic) -> _Channel:
-        schema_id = self.schemas.get(topic.type)
-        out = b""
-        if schema_id is None:
-            schema_id = len(self.schemas) + 1
-            self.schemas[topic.type] = schema_id
-            body = struct.pack("<H", schema_id) + encode_str(topic.type) + encode_str("ros2msg")
-            raw = topic.schema_text.encode("utf-8")
-            record = encode_record(Op.SCHEMA, body + struct.pack("<I", len(raw)) + raw)
-            self.schema_records.append(record)
-            out += record
-        channel = _Channel(len(self.all_channels) + 1, topic)
+        channel = _Channel(0, topic)  # id 0: not registered yet
         self.channels[topic.name] = channel
-        self.all_channels.append(channel)
-        metadata = {"offered_qos_profiles": topic.qos_yaml, "topic_type_hash": topic.type_hash}
-        body = struct.pack("<HH", channel.id, schema_id) + encode_str(topic.name)
-        record = encode_record(Op.CHANNEL, body + encode_str("cdr") + encode_map(metadata))
-        self.channel_records.append(record)
-        self._write(out + record)
-        self.stream.flush()
+        self._unregistered.append(channel)
         return channel
 
+    def _register(self, channel: _Channel) -> None:
+        # the open chunk is written first: mcap writes a chunk once it is full, and one filled
+        # by these records alone would be written without the message that lists the channel
+        # (a chunk without messages is not written: the records wait for that message)
+        self._writer.flush()  # type: ignore[no-untyped-call]
+        topic = channel.topic
+        schema_id = self.schemas.get(topic.type)
+        if schema_id is None:
+            raw = topic.schema_text.encode("utf-8")
+            schema_id = self._writer.register_schema(topic.type, "ros2msg", raw)
+            self.schemas[topic.type] = schema_id
+        metadata = {"offered_qos_profiles": topic.qos_yaml, "topic_type_hash": topic.type_hash}
+        channel.id = self._writer.register_channel(topic.name, "cdr", schema_id, metadata)
+        self._unregistered.remove(channel)
+
     def add_message(self, channel: _Channel, data: bytes, log_time: int, publish_time: int) -> None:
-        chunk = self.chunk
-        if not chunk:
-            self.chunk_start = log_time
-            self.chunk_end = log_time
-        elif log_time < self.chunk_start:
-            self.chunk_start = log_time
-        if log_time > self.chunk_end:
-            self.chunk_end = log_time
-        channel.index.append(log_time)
-        channel.index.append(len(chunk))
-        chunk += MESSAGE_HEADER.pack(
-            Op.MESSAGE,
-            MESSAGE_FIXED + len(data),
-            channel.id,
-            channel.sequence,
-            log_time,
-            publish_time,
-        )
-        chunk += data
+        if not channel.id:
+            self._register(channel)
+        self._writer.add_message(channel.id, log_time, data, publish_time, channel.sequence)
         channel.sequence = (channel.sequence + 1) & 0xFFFFFFFF
-        channel.count += 1
-        self.message_count += 1
-        if self.start_time is None or log_time < self.start_time:
-            self.start_time = log_time
-        if log_time > self.end_time:
-            self.end_time = log_time
 
     def finish_chunk(self) -> None:
-        """Write the open chunk and its message indexes in one write, then flush."""
-        if not self.chunk:
-            return
-        raw = bytes(self.chunk)
-        if self._zstd is not None:
-            packed = self._zstd.compress(raw)
-        elif self.compression == "lz4":
-            packed = lz4.frame.compress(raw)
-        else:
-            packed = raw
-        name = "" if self.compression == "none" else self.compression
-        head = struct.pack("<QQQI", self.chunk_start, self.chunk_end, len(raw), zlib.crc32(raw))
-        chunk_record = encode_record(
-            Op.CHUNK, head + encode_str(name) + struct.pack("<Q", len(packed)) + packed
-        )
-        chunk_offset = self.offset
-        index_offsets: dict[int, int] = {}
-        pos = chunk_offset + len(chunk_record)
-        parts = [chunk_record]
-        for channel in self.all_channels:
-            if not channel.index:
-                continue
-            pairs = np.frombuffer(channel.index, dtype="<u8").reshape(-1, 2)
-            if np.any(np.diff(pairs[:, 0].astype(np.int64)) < 0):  # index sorted by log time
-                pairs = pairs[np.argsort(pairs[:, 0], kind="stable")]
-            entries = pairs.tobytes()
-            record = encode_record(
-                Op.MESSAGE_INDEX, struct.pack("<HI", channel.id, len(entries)) + entries
-            )
-            index_offsets[channel.id] = pos
-            pos += len(record)
-            parts.append(record)
-            channel.index = array("Q")
-        self._write(b"".join(parts))
-        self.stream.flush()
-        index_length = pos - chunk_offset - len(chunk_record)
-        self.chunk_indexes.append(
-            encode_record(
-                Op.CHUNK_INDEX,
-                struct.pack(
-                    "<QQQQ", self.chunk_start, self.chunk_end, chunk_offset, len(chunk_record)
-                )
-                + encode_u16_u64_map(index_offsets)
-                + struct.pack("<Q", index_length)
-                + encode_str(name)
-                + struct.pack("<QQ", len(packed), len(raw)),
-            )
-        )
-        self.chunk_count += 1
-        self.chunk = bytearray()
+        """Write the open chunk and its message indexes now."""
+        self._writer.flush()  # type: ignore[no-untyped-call]
 
     def close(self, metadata_yaml: str, ros_distro: str) -> None:
         """Finish the data section (with the ``rosbag2`` metadata record), summary and footer."""
-        self.finish_chunk()
-        meta = encode_record(
-            Op.METADATA,
-            encode_str("rosbag2")
-            + encode_map({"serialized_metadata": metadata_yaml, "ROS_DISTRO": ros_distro}),
-        )
-        self.metadata_indexes.append(
-            encode_record(
-                Op.METADATA_INDEX,
-                struct.pack("<QQ", self.offset, len(meta)) + encode_str("rosbag2"),
-            )
-        )
-        self._write(meta + encode_record(Op.DATA_END, struct.pack("<I", 0)))
-        summary_start = self.offset
-        counts = {c.id: c.count for c in self.all_channels}
-        statistics = encode_record(
-            Op.STATISTICS,
-            struct.pack(
-                "<QHIIIIQQ",
-                self.message_count,
-                len(self.schemas),
-                len(self.all_channels),
-                0,
-                len(self.metadata_indexes),
-                self.chunk_count,
-                self.start_time or 0,
-                self.end_time,
-            )
-            + encode_u16_u64_map(counts),
-        )
-        groups = [
-            (Op.SCHEMA, self.schema_records),
-            (Op.CHANNEL, self.channel_records),
-            (Op.STATISTICS, [statistics]),
-            (Op.CHUNK_INDEX, self.chunk_indexes),
-            (Op.METADATA_INDEX, self.metadata_indexes),
-        ]
-        summary = bytearray()
-        offsets = bytearray()
-        for opcode, records in groups:
-            if not records:
-                continue
-            group = b"".join(records)
-            offsets += encode_record(
-                Op.SUMMARY_OFFSET,
-                struct.pack("<BQQ", opcode, summary_start + len(summary), len(group)),
-            )
-            summary += group
-        summary_offset_start = summary_start + len(summary)
-        footer_head = struct.pack("<BQQQ", Op.FOOTER, 20, summary_start, summary_offset_start)
-        crc = zlib.crc32(bytes(summary) + bytes(offsets) + footer_head)
-        self._write(bytes(summary) + bytes(offsets) + footer_head + struct.pack("<I", crc) + MAGIC)
-        self.stream.flush()
+        for channel in list(self._unregistered):
+            self._register(channel)
+        metadata = {"serialized_metadata": metadata_yaml, "ROS_DISTRO": ros_distro}
+        self._writer.add_metadata("rosbag2", metadata)
+        self._writer.finish()  # type: ignore[no-untyped-call]
         self.stream.close()
 
 
@@ -309,7 +210,6 @@ class BagWriter:
         path: str | os.PathLike[str],
         *,
         compression: str = "zstd",
-        compression_level: int = 3,
         chunk_size: int = 1 << 20,
         max_file_size: int = 0,
         max_file_duration_ns: int = 0,
@@ -329,7 +229,6 @@ class BagWriter:
             raise WriterStateError(self.path, "the bag path exists and is not an empty directory")
         self.path.mkdir(parents=True, exist_ok=True)
         self.compression = compression
-        self.compression_level = compression_level
         self.chunk_size = chunk_size
         self.max_file_size = max_file_size
         self.max_file_duration_ns = max_file_duration_ns
@@ -408,10 +307,8 @@ class BagWriter:
             stats.start = log_time_ns
         if stats.end is None or log_time_ns > stats.end:
             stats.end = log_time_ns
-        if len(file.chunk) >= self.chunk_size:
-            file.finish_chunk()
-            if self.max_file_size and file.offset >= self.max_file_size:
-                self._split()
+        if self.max_file_size and file.size >= self.max_file_size:
+            self._split()  # the size grows as chunks are written
 
     def flush(self) -> None:
         """Write the open chunk now (smaller chunks compress worse; chunks flush by themselves)."""
@@ -451,7 +348,7 @@ class BagWriter:
 
     def _open_next_file(self) -> _McapFile:
         path = self.path / f"{self.path.name}_{len(self._files)}.mcap"
-        file = _McapFile(path, self.compression, self.compression_level)
+        file = _McapFile(path, self.compression, self.chunk_size)
         self._files.append(_FileStats(path))
         for topic in self._topics.values():
             file.add_channel(topic)

@@ -13,6 +13,7 @@ from pathlib import Path
 
 import pytest
 import yaml
+import zstandard
 from bag.test_analysis import write_feeder_bag
 from mcap.reader import make_reader
 from mcap.records import Channel, Message
@@ -187,10 +188,21 @@ def test_reindex_keeps_the_count_of_what_was_lost(
     assert info.loss.lost == lost
 
 
-def test_verify_says_what_it_checked(tmp_path: Path, capsys: pytest.CaptureFixture[str]) -> None:
+@pytest.mark.parametrize("frame_checksums", [False, True], ids=["crc32", "zstd-checksums"])
+def test_verify_says_what_it_checked(
+    tmp_path: Path,
+    capsys: pytest.CaptureFixture[str],
+    monkeypatch: pytest.MonkeyPatch,
+    frame_checksums: bool,
+) -> None:
     """Without --verify, info counts from the message indexes and says what --verify adds; with
     it, every chunk is decompressed and checked and every message decoded: a message cut before
-    its last field is found only then (and is lost data: exit 1)."""
+    its last field is found only then (and is lost data: exit 1). Chunks are checked by their
+    CRC-32 (as mcap's writer writes them), or by zstd's frame checksum where the frame has one
+    (other writers': zstd verifies it while decompressing, and the CRC is not computed again)."""
+    if frame_checksums:
+        compressor = zstandard.ZstdCompressor(write_checksum=True)
+        monkeypatch.setattr("mcap.writer.zstandard.compress", compressor.compress)
     bag = tmp_path / "bag"
     with BagWriter(bag, chunk_size=1024) as writer:
         writer.add_topic("/fast", "std_msgs/msg/Float64")
@@ -207,9 +219,10 @@ def test_verify_says_what_it_checked(tmp_path: Path, capsys: pytest.CaptureFixtu
     assert "--verify also decompresses every chunk, checks its CRC" in text
     assert main(["info", str(bag), "--verify"]) == 1
     text = capsys.readouterr().out
+    crc, frames = (0, chunks) if frame_checksums else (chunks, 0)
     assert (
-        f"Verified:  {chunks} chunk(s) in 1 file(s): {chunks} decompressed, 0 CRC-32 and "
-        f"{chunks} zstd checksum(s) checked, 300 message record(s) checked against their index, "
+        f"Verified:  {chunks} chunk(s) in 1 file(s): {chunks} decompressed, {crc} CRC-32 and "
+        f"{frames} zstd checksum(s) checked, 300 message record(s) checked against their index, "
         "299 message(s) decoded"
     ) in text
     assert "[malformed_message]" in text
