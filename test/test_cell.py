@@ -12,6 +12,7 @@ from pathlib import Path
 import pytest
 import yaml
 from ros_test_tools import probe_node, wait_until
+from simulator_process import manual_cell_file
 from stuck_code import TEARDOWN_TIMEOUT_TEXT, stuck_teardown_script
 
 from feeder_ros.cell import CellError, load_cell, parameters_document
@@ -28,25 +29,8 @@ def _write(path: Path, cell: object) -> Path:
 
 
 def _two_feeders(tmp_path: Path) -> Path:
-    feeder = {
-        "nodes": {
-            "platform_simulator": {
-                "params_file": str(CONFIG / "platform_simulator.yaml"),
-                "section": "platform_simulator_realistic",
-                "parameters": {"imu_rate_hz": 200.0, "state_rate_hz": 50.0},
-            },
-            "manual_drive": {"parameters": {"frequency_hz": 20.0, "amplitude_n": 40.0}},
-        }
-    }
-    return _write(
-        tmp_path / "cell.yaml",
-        {
-            "name": "test_cell",
-            "feeders": [
-                {"namespace": "/side/feeder_a", **feeder},
-                {"namespace": "/side/feeder_b", **feeder},
-            ],
-        },
+    return manual_cell_file(
+        tmp_path / "cell.yaml", "test_cell", ["/side/feeder_a", "/side/feeder_b"]
     )
 
 

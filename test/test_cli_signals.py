@@ -17,37 +17,18 @@ import sys
 import time
 from pathlib import Path
 
-import yaml
 from ros_test_tools import DrainedProcess, probe_node, wait_until
+from simulator_process import manual_cell_file
 
 from feeder_ros.bag import Bag, bag_info
 
 BIN = Path(sys.executable).parent
 FEEDER = str(BIN / "feeder")
-CONFIG = Path(__file__).resolve().parents[1] / "config"
 NS = "/sig_cell/feeder_1"
 
 
 def _one_feeder(tmp_path: Path) -> Path:
-    cell = {
-        "name": "sig_cell",
-        "feeders": [
-            {
-                "namespace": NS,
-                "nodes": {
-                    "platform_simulator": {
-                        "params_file": str(CONFIG / "platform_simulator.yaml"),
-                        "section": "platform_simulator_realistic",
-                        "parameters": {"imu_rate_hz": 200.0, "state_rate_hz": 50.0},
-                    },
-                    "manual_drive": {"parameters": {"frequency_hz": 20.0, "amplitude_n": 40.0}},
-                },
-            }
-        ],
-    }
-    path = tmp_path / "cell.yaml"
-    path.write_text(yaml.safe_dump({"cell": cell}), encoding="utf-8")
-    return path
+    return manual_cell_file(tmp_path / "cell.yaml", "sig_cell", [NS])
 
 
 def _start(*args: str) -> DrainedProcess:

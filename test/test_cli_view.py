@@ -11,13 +11,12 @@ from pathlib import Path
 from typing import Any
 
 import pytest
-import yaml
 from foxglove_client import FoxgloveClient
 from rclpy.qos import QoSProfile, ReliabilityPolicy
 from rclpy.serialization import deserialize_message
 from ros_test_tools import probe_node, running, wait_until
 from sensor_msgs.msg import Imu
-from simulator_process import drive, simulator
+from simulator_process import drive, manual_cell_file, simulator
 
 from feeder_ros.bag.schemas import ros2msg_schema
 from feeder_ros.msg import CarrierState, DriveCommand
@@ -107,26 +106,8 @@ def test_view_on_a_taken_port_is_refused_with_the_port() -> None:
 
 def _manual_cell(tmp_path: Path) -> Path:
     """Two simulated feeders, each driven at 20 Hz, 40 N by its manual_drive node."""
-    feeder = {
-        "nodes": {
-            "platform_simulator": {
-                "params_file": str(CONFIG / "platform_simulator.yaml"),
-                "section": "platform_simulator_realistic",
-                "parameters": {"imu_rate_hz": 200.0, "state_rate_hz": 50.0},
-            },
-            "manual_drive": {"parameters": {"frequency_hz": 20.0, "amplitude_n": 40.0}},
-        }
-    }
-    cell = {
-        "name": "view_cell",
-        "feeders": [
-            {"namespace": "/view_cell/feeder_a", **feeder},
-            {"namespace": "/view_cell/feeder_b", **feeder},
-        ],
-    }
-    path = tmp_path / "cell.yaml"
-    path.write_text(yaml.safe_dump({"cell": cell}), encoding="utf-8")
-    return path
+    namespaces = ["/view_cell/feeder_a", "/view_cell/feeder_b"]
+    return manual_cell_file(tmp_path / "cell.yaml", "view_cell", namespaces)
 
 
 @pytest.mark.parametrize("composed", [False, True], ids=["processes", "composed"])

@@ -1,4 +1,5 @@
-"""argparse ``type=`` converters shared by the sub-commands: each refuses with the value named."""
+"""argparse ``type=`` converters shared by the sub-commands (each refuses with the value named),
+and the options of the commands that take topics from a running graph."""
 
 from __future__ import annotations
 
@@ -7,6 +8,7 @@ import math
 from collections.abc import Callable
 
 __all__ = [
+    "add_topic_selection",
     "int_at_least",
     "non_negative_float",
     "non_negative_int",
@@ -64,3 +66,27 @@ def int_at_least(minimum: int) -> Callable[[str], int]:
 
     convert.__name__ = f"integer >= {minimum}"  # argparse names the type in some messages
     return convert
+
+
+def add_topic_selection(parser: argparse.ArgumentParser, verb: str) -> None:
+    """``TOPIC...``, ``--namespace``, ``--duration`` and ``--use-sim-time``, for a command that
+    ``verb``s topics of the running graph (``feeder record``, ``feeder view``)."""
+    parser.add_argument(
+        "topics",
+        nargs="*",
+        metavar="TOPIC",
+        help=f"topics to {verb} (relative names are taken in --namespace); "
+        "default: every topic under --namespace, plus /diagnostics",
+    )
+    parser.add_argument(
+        "--namespace", default="/", help="the feeder's namespace (default: /, every topic)"
+    )
+    parser.add_argument(
+        "--duration",
+        type=positive_float,
+        metavar="S",
+        help="stop after this many seconds, > 0 (default: until Ctrl-C)",
+    )
+    parser.add_argument(
+        "--use-sim-time", action="store_true", help="log times from /clock instead of the wall"
+    )

@@ -13,7 +13,7 @@ import math
 import time
 from pathlib import Path
 
-from feeder_ros.cli.arguments import positive_float
+from feeder_ros.cli.arguments import add_topic_selection
 from feeder_ros.cli.main import CommandError
 from feeder_ros.cli.outputs import check_output_dir, output_path
 
@@ -65,16 +65,7 @@ def _seconds(text: str) -> float:
 
 
 def add_arguments(parser: argparse.ArgumentParser) -> None:
-    parser.add_argument(
-        "topics",
-        nargs="*",
-        metavar="TOPIC",
-        help="topics to record (relative names are taken in --namespace); "
-        "default: every topic under --namespace, plus /diagnostics",
-    )
-    parser.add_argument(
-        "--namespace", default="/", help="the feeder's namespace (default: /, every topic)"
-    )
+    add_topic_selection(parser, "record")
     parser.add_argument(
         "-o",
         "--output",
@@ -107,15 +98,6 @@ def add_arguments(parser: argparse.ArgumentParser) -> None:
         default=0.0,
         metavar="S",
         help="start a new file after this many seconds (0: never)",
-    )
-    parser.add_argument(
-        "--duration",
-        type=positive_float,
-        metavar="S",
-        help="stop after this many seconds, > 0 (default: until Ctrl-C)",
-    )
-    parser.add_argument(
-        "--use-sim-time", action="store_true", help="log times from /clock instead of the wall"
     )
 
 

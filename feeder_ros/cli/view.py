@@ -9,7 +9,7 @@ from __future__ import annotations
 
 import argparse
 
-from feeder_ros.cli.arguments import positive_float
+from feeder_ros.cli.arguments import add_topic_selection
 from feeder_ros.cli.main import CommandError
 from feeder_ros.live_view import DEFAULT_PORT, LOCALHOST
 
@@ -46,16 +46,7 @@ def port_number(text: str) -> int:
 
 
 def add_arguments(parser: argparse.ArgumentParser) -> None:
-    parser.add_argument(
-        "topics",
-        nargs="*",
-        metavar="TOPIC",
-        help="topics to serve (relative names are taken in --namespace); "
-        "default: every topic under --namespace, plus /diagnostics",
-    )
-    parser.add_argument(
-        "--namespace", default="/", help="the feeder's namespace (default: /, every topic)"
-    )
+    add_topic_selection(parser, "serve")
     parser.add_argument(
         "--port",
         type=port_number,
@@ -64,15 +55,6 @@ def add_arguments(parser: argparse.ArgumentParser) -> None:
     )
     parser.add_argument(
         "--host", default=LOCALHOST, help=f"address to listen on (default {LOCALHOST})"
-    )
-    parser.add_argument(
-        "--duration",
-        type=positive_float,
-        metavar="S",
-        help="stop after this many seconds, > 0 (default: until Ctrl-C)",
-    )
-    parser.add_argument(
-        "--use-sim-time", action="store_true", help="log times from /clock instead of the wall"
     )
 
 
