@@ -19,7 +19,10 @@ from __future__ import annotations
 import threading
 from collections.abc import Callable, Sequence
 from dataclasses import dataclass
-from typing import Any
+from typing import TYPE_CHECKING, Any
+
+if TYPE_CHECKING:  # rclpy: imported when a view is served, not by the CLI's help
+    from feeder_ros.recording import TopicSelection
 
 __all__ = ["DEFAULT_PORT", "LOCALHOST", "FoxgloveSink", "LiveViewError", "ViewSummary", "serve"]
 
@@ -110,15 +113,15 @@ class ViewSummary:
 
 
 def serve(
-    options: Any,
+    options: TopicSelection,
     host: str = LOCALHOST,
     port: int = DEFAULT_PORT,
     args: Sequence[str] | None = None,
     on_ready: Callable[[FoxgloveSink], None] | None = None,
 ) -> ViewSummary:
-    """Serve the topics ``options`` (a :class:`feeder_ros.recording.TopicSelection`) selects
-    until Ctrl-C, SIGTERM or its duration. Raises :class:`LiveViewError` if the server cannot
-    start; ``on_ready(sink)`` once it listens and the node is up."""
+    """Serve the topics ``options`` selects until Ctrl-C, SIGTERM or its duration. Raises
+    :class:`LiveViewError` if the server cannot start; ``on_ready(sink)`` once it listens and the
+    node is up."""
     from feeder_ros.recording import Forwarded, forward  # rclpy: only when a view is served
 
     sink = FoxgloveSink(host, port)

@@ -138,3 +138,12 @@ def test_everything_imported_is_declared() -> None:
     assert undeclared(package, runtime) == {}
     tests = list(REPO.joinpath("test").rglob("*.py"))
     assert undeclared(tests, runtime | {_name(r) for r in sections["tests"]}) == {}
+
+
+def test_the_readme_pip_installs_every_runtime_dependency_without_a_rosdep_key() -> None:
+    """A stock ROS workspace gets these only from the README's pip line: none may be missing."""
+    readme = (REPO / "README.md").read_text(encoding="utf-8")
+    [line] = [ln for ln in readme.splitlines() if ln.startswith("pip install ")]
+    named = {_name(word.strip('"')) for word in line.split("#")[0].split()[2:]}
+    without_key = {name for name, key in KEYS["runtime"].items() if key is None}
+    assert named == without_key
