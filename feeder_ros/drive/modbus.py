@@ -17,7 +17,7 @@ import math
 import threading
 import time
 from collections.abc import Mapping
-from dataclasses import dataclass
+from dataclasses import dataclass, replace
 from typing import Any
 
 from pymodbus.client import ModbusTcpClient
@@ -276,6 +276,9 @@ class ModbusTcpBackend:
         except ValueError as error:  # never send what the registers cannot hold: drive off
             encode_fault = f"command not representable: {error}"
             registers = self.map.encode(DriveOutput(False, 0.0, 0.0, 0.0), self._heartbeat, reset)
+        if encode_fault:  # said before the drive is switched off, never after
+            with self._lock:
+                self._status = replace(self._status, fault=encode_fault)
         for start, values in contiguous_runs(registers):
             response = client.write_registers(start, values, device_id=device)
             if response.isError():
