@@ -70,19 +70,17 @@ class FoxgloveSink:
         kept as the channel's metadata, as a bag keeps it."""
         from feeder_ros.bag.schemas import ros2msg_schema  # loaded when a view is served
 
-        schema = ros2msg_schema(type_name).encode("utf-8")
-        channel = self._foxglove.Channel(
-            name,
-            schema=self._foxglove.Schema(name=type_name, encoding="ros2msg", data=schema),
-            message_encoding="cdr",
-            context=self._context,
-            metadata={"offered_qos_profiles": offered_qos_profiles},
-        )
-        with self._lock:
+        with self._lock:  # checked before advertising: clients never see a channel come and go
             if name in self._channels:
-                channel.close()
                 raise ValueError(f"topic {name} is already served")
-            self._channels[name] = channel
+            schema = ros2msg_schema(type_name).encode("utf-8")
+            self._channels[name] = self._foxglove.Channel(
+                name,
+                schema=self._foxglove.Schema(name=type_name, encoding="ros2msg", data=schema),
+                message_encoding="cdr",
+                context=self._context,
+                metadata={"offered_qos_profiles": offered_qos_profiles},
+            )
 
     def write(self, topic: str, data: bytes, log_time_ns: int) -> None:
         """Send one message's CDR bytes to the clients subscribed to ``topic``."""
