@@ -237,11 +237,11 @@ class VehicleEstimator:
             raise ParameterError(f"frequency_hz={frequency_hz!r} must be finite and > 0")
         if not math.isfinite(amp) or not math.isfinite(float(t_s)):
             raise ParameterError(f"amplitude={amplitude!r} and t_s={t_s!r} must be finite")
-        self.flush()  # staged samples belong to the drive before this command
         previous = self._command
+        if previous == (f, amp):
+            return  # a repeated command (a drive re-sends its set point) changes nothing
+        self.flush()  # staged samples belong to the drive before this command
         self._command = (f, amp)
-        if previous == self._command:
-            return
         close = self._freq is not None and abs(self._freq - f) <= self._cfg.frequency_tolerance * f
         if previous is None and close:
             # the first command confirms the estimate: adopt its exact value, no restart

@@ -201,11 +201,17 @@ class EstimatorCalibration:
         self._cal_lock = threading.Lock()
         self._count_lock = threading.Lock()  # the refusal count and message (any thread)
         self._calibrator = self._start(nominal)
-        self._queue: queue.SimpleQueue[tuple[int, SpeedMeasurement]] = queue.SimpleQueue()
+        self._queue: queue.SimpleQueue[tuple[int, SpeedMeasurement] | None] = queue.SimpleQueue()
+        # closed before the node is destroyed: the worker then publishes nothing more (a publish
+        # on a destroyed node raises) and ends at its next queue item
+        self._publish_lock = threading.Lock()
+        self._closed = False
         self._generation = 0  # a reset or a new nominal part drops the queued measurements
         self._publisher = node.create_publisher(PartCalibration, "calibration", LATCHED_QOS)
+        self.worker: threading.Thread | None = None
         if self._enabled:
-            threading.Thread(target=self._work, name="part-calibration", daemon=True).start()
+            self.worker = threading.Thread(target=self._work, name="part-calibration", daemon=True)
+            self.worker.start()
             node.create_subscription(
                 PartSensorEvent, "parts/sensor_events", self._on_sensor_event, EVENT_QOS
             )
@@ -322,12 +328,19 @@ class EstimatorCalibration:
     # -- updates -----------------------------------------------------------------------------
     def _work(self) -> None:
         """The worker: folds the queued transits in, one at a time, in their order."""
-        while True:
-            generation, measurement = self._queue.get()
+        while (item := self._queue.get()) is not None:
+            generation, measurement = item
             try:
                 self._fold_in(generation, measurement)
             except Exception as error:  # the worker must outlive one bad update
                 self._refuse(f"calibration update failed: {error!r}")
+
+    def close(self) -> None:
+        """Stop publishing and end the worker (before the node is destroyed); an update being
+        folded in meanwhile still reaches the file, not the topic."""
+        with self._publish_lock:
+            self._closed = True
+        self._queue.put(None)
 
     def _fold_in(self, generation: int, measurement: SpeedMeasurement) -> CalibrationResult:
         """Fold ``measurement`` in (with the calibration lock: the estimates go on meanwhile),
@@ -369,7 +382,9 @@ class EstimatorCalibration:
             self._file_problem = ""
 
     def _publish(self) -> None:
-        self._publisher.publish(self.message())
+        with self._publish_lock:
+            if not self._closed:
+                self._publisher.publish(self.message())
 
     # -- outputs -----------------------------------------------------------------------------
     def message(self) -> PartCalibration:

@@ -467,6 +467,22 @@ def test_small_pushes_are_staged_until_they_span_the_batch_interval(
     assert unstaged.push(steady.t_s[3000:3001], a[3000:3001]).t_s == steady.t_s[3000]
 
 
+def test_a_repeated_drive_command_keeps_the_staged_samples_staged(
+    steady: SimulationResult,
+) -> None:
+    """A drive re-sends its set point (50 Hz in the demo cell): only a change flushes."""
+    est = _estimator()
+    a = _noisy(steady)
+    f, amplitude = PARAMS.drive_frequency_hz, PARAMS.drive_amplitude_n
+    est.set_drive(f, amplitude, 0.0)
+    est.push(steady.t_s[:3000], a[:3000])
+    assert est.push(steady.t_s[3000:3005], a[3000:3005]).t_s == steady.t_s[2999]  # staged
+    est.set_drive(f, amplitude, float(steady.t_s[3004]))  # the same command again
+    assert est.last_estimate.t_s == steady.t_s[2999]  # still staged
+    est.set_drive(f, 0.5 * amplitude, float(steady.t_s[3004]))  # a change
+    assert est.last_estimate.t_s == steady.t_s[3004]  # flushed: they belong to the old drive
+
+
 def test_irregular_sample_times() -> None:
     """Stamps jittered by up to +-0.2 ms (the true motion at the stamped times)."""
     rng = np.random.default_rng(2)

@@ -428,6 +428,28 @@ def test_a_parameter_change_keeps_the_drive_command_in_force() -> None:
         rclpy.shutdown(context=context)
 
 
+def test_the_calibration_worker_ends_before_the_node_is_destroyed() -> None:
+    """Its worker publishes each update; one finishing while the node shuts down must not
+    publish on the destroyed node (a traceback at every such stop)."""
+    import rclpy
+
+    from feeder_ros.nodes.vehicle_estimator import VehicleEstimatorNode
+
+    context = rclpy.Context()
+    rclpy.init(context=context)
+    try:
+        node = VehicleEstimatorNode(context=context)
+        calibration = node._calibration
+        assert calibration.worker is not None
+        assert calibration.worker.is_alive()
+        node.destroy_node()
+        calibration.worker.join(timeout=5.0)
+        assert not calibration.worker.is_alive()
+        calibration._publish()  # an update that finished meanwhile: nothing to publish on
+    finally:
+        rclpy.shutdown(context=context)
+
+
 def test_its_own_stall_is_no_sensor_timeout_but_silence_is() -> None:
     """The estimator process stopped for 2.6 s (input_timeout_s is 1 s) while the accelerometer
     keeps sending: no sensor timeout once it runs again. Samples that really stop raise it."""
@@ -486,3 +508,53 @@ def test_its_own_stall_is_no_sensor_timeout_but_silence_is() -> None:
             stop.set()
             feeder.join(timeout=5)
             process.send_signal(signal.SIGCONT)
+
+
+def test_estimates_keep_their_rate_while_the_drive_repeats_its_command() -> None:
+    """A drive re-sends its set point at 50 Hz, each right after a burst of samples here: the
+    estimate still goes out at its publish rate (20 Hz), not only when a timer tick happens to
+    find samples the command callback left it."""
+    ns = "/estimator_repeated_command"
+    command = [
+        str(BIN / "vehicle_estimator"), "--ros-args", "-r", f"__ns:={ns}",
+        "-p", f"qos_overrides.{ns}/imu.subscription.reliability:=reliable",
+    ]  # fmt: skip
+    with running(command), probe_node() as node:
+        received: list[float] = []
+        node.create_subscription(
+            VehicleEstimate, f"{ns}/estimate", lambda m: received.append(time.monotonic()), 100
+        )
+        imu = node.create_publisher(Imu, f"{ns}/imu", RELIABLE)
+        drive = node.create_publisher(DriveCommand, f"{ns}/drive/command", RELIABLE)
+        assert wait_until(
+            lambda: imu.get_subscription_count() > 0 and drive.get_subscription_count() > 0, 20.0
+        )
+        stop = threading.Event()
+
+        def feed() -> None:  # 500 Hz in bursts of 10 samples, each burst then the command
+            k = 0
+            while not stop.is_set():
+                for _ in range(10):
+                    t = 1000.0 + k / 500.0
+                    message = Imu()
+                    message.header.stamp.sec = int(t)
+                    message.header.stamp.nanosec = round((t - int(t)) * 1e9)
+                    message.linear_acceleration.x = 3.0 * math.sin(2 * math.pi * 25.0 * t)
+                    imu.publish(message)
+                    k += 1
+                again = DriveCommand(enabled=True, frequency_hz=25.0, amplitude_n=10.0)
+                again.header.stamp.sec = 1000
+                drive.publish(again)
+                time.sleep(0.02)
+
+        feeder = threading.Thread(target=feed, daemon=True)
+        feeder.start()
+        try:
+            assert wait_until(lambda: bool(received), 15.0)
+            start, count = time.monotonic(), len(received)
+            time.sleep(4.0)
+            rate = (len(received) - count) / (time.monotonic() - start)
+        finally:
+            stop.set()
+            feeder.join(timeout=5)
+        assert rate >= 0.75 * DEFAULTS["publish_rate_hz"], f"{rate:.1f} estimates/s"
