@@ -27,7 +27,7 @@ INTERFACE_SOURCES := CMakeLists.txt package.xml $(wildcard msg/*.msg srv/*.srv a
 PACKAGE_SOURCES := $(shell find feeder_ros config resource -type f -not -path '*/__pycache__/*' 2>/dev/null)
 LINT_PATHS := $(wildcard feeder_ros test bench tools launch) setup.py
 
-.PHONY: help install workspace test test-ros lint typecheck pytest demo bench constraints clean
+.PHONY: help install workspace browser pictures test test-ros lint typecheck pytest demo bench constraints clean
 
 # The ROS-facing tests: install paths, interface build, DDS smoke, every node over DDS, the cell,
 # the demo and the two-host layout. CI runs them on the second distribution (make test-ros
@@ -42,6 +42,7 @@ help:
 	@echo "              (ROS_DISTRO=jazzy by default, or kilted; the venv is rebuilt on a switch)"
 	@echo "make test-ros - type-check and run only the ROS-facing tests"
 	@echo "make bench  - run the benchmarks and print ratios against their baselines"
+	@echo "make pictures - the README's picture of the report (after make demo)"
 
 $(STAMPS):
 	@mkdir -p $@
@@ -99,7 +100,11 @@ lint: $(STAMPS)/venv
 typecheck: install
 	$(VENV)/bin/mypy
 
-pytest: install workspace
+# the report tests render the HTML report in a real browser
+browser:
+	@tools/ensure_browser.sh
+
+pytest: install workspace browser
 	@FEEDER_ROS_WORKSPACE=$(CURDIR)/$(WS) $(PY) -m pytest $(PYTEST_ARGS); status=$$?; \
 	if [ $$status -eq 5 ]; then echo "pytest collected no tests: that is a failure here" >&2; exit 1; fi; \
 	if [ $$status -ne 0 ] && [ -s $(WORK)/test-hang.log ]; then cat $(WORK)/test-hang.log >&2; fi; \
@@ -112,6 +117,13 @@ test-ros: typecheck pytest
 
 demo: install
 	$(PY) -m feeder_ros.demo --output demo-output
+
+# the README's picture of the report: the top of the demo's report as a 1280 px window shows it
+pictures: browser
+	@test -f demo-output/report/report.html || { echo "run make demo first: it writes demo-output/report/report.html" >&2; exit 1; }
+	mkdir -p docs/images
+	chromium --headless --no-sandbox --disable-gpu --hide-scrollbars --window-size=1280,1500 \
+		--screenshot=$(CURDIR)/docs/images/report.png file://$(CURDIR)/demo-output/report/report.html
 
 bench: install
 	$(PY) bench/run_all.py

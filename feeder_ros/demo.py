@@ -9,6 +9,8 @@
 3. A probe records what the cell published; the demo prints a summary (speeds achieved against
    the targets, by the estimator, by the part-present sensors and in truth; feed rate; diagnostics
    seen) and writes plots and the data to ``--output``.
+4. ``feeder record`` records the feeder meanwhile (``--output``/bag), and the demo ends with
+   ``feeder analyze``'s report of that bag (``--output``/report/report.html).
 """
 
 from __future__ import annotations
@@ -35,6 +37,7 @@ from rclpy.executors import MultiThreadedExecutor
 from rclpy.node import Node
 from rclpy.qos import DurabilityPolicy, QoSProfile, ReliabilityPolicy
 
+from feeder_ros import demo_recording
 from feeder_ros.cell import load_cell
 from feeder_ros.msg import (
     DriveState,
@@ -439,6 +442,7 @@ def main(argv: list[str] | None = None) -> int:
     timeline_file = args.output / "controller_timeline.json"
     timeline_file.unlink(missing_ok=True)  # an earlier run's must not pass for this one's
     controller_code: int | None = None  # None: not started (the cell did not come up)
+    recorder: subprocess.Popen[bytes] | None = None
     missing: list[str] = []
     try:
         print(
@@ -450,6 +454,7 @@ def main(argv: list[str] | None = None) -> int:
         )
         if not missing:
             print(f"[demo] the cell is up after {time.monotonic() - started:.1f} s", flush=True)
+            recorder = demo_recording.start(bin_dir, args.namespace, args.output)
             controller_code = subprocess.run(
                 [
                     sys.executable, "-m", "feeder_ros.examples.cell_controller",
@@ -468,6 +473,9 @@ def main(argv: list[str] | None = None) -> int:
         executor.shutdown()
         thread.join(timeout=5)
         rclpy.shutdown(context=context)
+        report = "report: none (the cell did not come up)"
+        if recorder is not None:
+            report = demo_recording.finish(recorder, args.namespace, args.output)
 
     timeline = json.loads(timeline_file.read_text()) if timeline_file.exists() else []
     summary = summarise(recording, timeline, args.output, args.hold)
@@ -512,6 +520,7 @@ def main(argv: list[str] | None = None) -> int:
         detail = f" ({message}; first at {at:g} s)" if level != "OK" else ""
         print(f"  {level:5} {name}{detail}")
     print(f"plots: {', '.join(str(p) for p in plots)}; data: {args.output / 'summary.json'}")
+    print(report)
     print(f"demo took {time.monotonic() - started:.0f} s")
     tolerance = monitor_tolerance(args.cell, args.namespace)
     landed = [

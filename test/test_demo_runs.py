@@ -6,6 +6,7 @@ Each run is the whole demo (about 80-100 s): the cell, the example controller, t
 
 from __future__ import annotations
 
+import json
 import os
 import signal
 import subprocess
@@ -17,6 +18,8 @@ from contextlib import contextmanager
 from pathlib import Path
 
 import pytest
+from browser import layout
+from rosbags.rosbag2 import Reader
 
 DEMO_LIMIT_S = 400.0
 
@@ -94,9 +97,23 @@ def test_the_demo_passes_on_a_machine_loaded_by_two_busy_processes(tmp_path: Pat
 
 @pytest.mark.timeout(DEMO_LIMIT_S + 60)
 def test_the_demo_passes_composed_in_one_process(tmp_path: Path) -> None:
+    """... and its report of the recorded cell fits a 1280 px browser window with the bag's
+    figures: the parts fed are the bag's PartExit messages (rosbags), one drive fault (the
+    controller's watchdog test), as the demo's own probe counted them."""
     code, output = _finish(_demo(tmp_path, "--composed"))
     assert (code, "DEMO OK" in output) == (0, True), output[-5000:]
     assert "cannot keep up" not in output
+
+    with Reader(tmp_path / "out" / "bag") as reader:
+        exits = [c for c in reader.connections if c.topic.endswith("/parts/exit")]
+        fed = sum(1 for _ in reader.messages(connections=exits))
+    summary = json.loads((tmp_path / "out" / "summary.json").read_text())
+    assert fed == summary["parts_fed"] > 0
+    rendered = layout(tmp_path / "out" / "report" / "report.html", width=1280)
+    assert (rendered["over"], rendered["scroll_width"]) == ([], 1280)
+    assert rendered["headline"]["parts_fed"] == str(fed)
+    assert rendered["headline"]["faults"].startswith("1 (")
+    assert f"parts fed {fed}," in output
 
 
 @pytest.mark.timeout(DEMO_LIMIT_S + 60)

@@ -35,3 +35,19 @@ def test_readme_node_tables_are_current() -> None:
         "README is stale; run python -m feeder_ros.docgen README.md\n"
         + (result.stdout + result.stderr)
     )
+
+
+def test_readme_pictures_exist_and_say_what_makes_them() -> None:
+    """Every picture the README shows is in the repository, a 1280 px wide PNG (a browser
+    window's width), with the command that makes it in its caption."""
+    import re
+    import struct
+
+    pictures = re.findall(r"!\[([^\]]*)\]\(([^)]+)\)", (REPO / "README.md").read_text())
+    assert pictures
+    for caption, path in pictures:
+        data = (REPO / path).read_bytes()
+        assert data[:8] == b"\x89PNG\r\n\x1a\n", path
+        width = struct.unpack(">I", data[16:20])[0]
+        assert width == 1280, (path, width)
+        assert "make " in caption, caption

@@ -18,7 +18,8 @@ or, in bags without carrier state, from ``DriveCommand``. A segment runs from th
 its setting to the first sample with the next one.
 
 Per segment: mean part speed from the estimator (``VehicleEstimate.mean_speed_mps``, samples with
-status OK), from ground truth (``PartStateArray``: mean velocity of the parts on the track) and
+status OK), from ground truth (``PartStateArray``: the parts' displacement on the track over their
+time on it, see ``Accumulator._part_steps``) and
 from part-present sensor transits (``PartSensorEvent`` rising edges of one part at two sensors:
 distance over time; only transits whose whole passage lies within the segment, see
 :mod:`feeder_ros.bag.accumulator`); slip fraction from the estimator and from the ground-truth
@@ -37,6 +38,7 @@ from collections.abc import Callable, Mapping, Sequence
 from dataclasses import dataclass, field
 from pathlib import Path
 
+from feeder_ros.bag import run_log
 from feeder_ros.bag.accumulator import PENDING_LIMIT, Accumulator, segments
 from feeder_ros.bag.errors import BagError, UnsupportedLayoutError
 from feeder_ros.bag.feeders import (
@@ -63,6 +65,7 @@ from feeder_ros.bag.results import (
     Segment,
     frequency_response,
 )
+from feeder_ros.bag.run_log import DRIVE_STATE, SPEED_STATUS, RunLog, run_figures, targets
 
 __all__ = [
     "FEEDER_TYPES",
@@ -83,9 +86,16 @@ REQUESTS: dict[str, list[str]] = {
     CARRIER_STATE: [*_STAMP, "drive_frequency_hz", "drive_amplitude_n"],
     CARRIER_STATE_BATCH: [*_STAMP, "sample_period_s", "drive_frequency_hz", "drive_amplitude_n"],
     VEHICLE_ESTIMATE: [*_STAMP, "mean_speed_mps", "slip_fraction", "status"],
-    PART_STATE_ARRAY: [*_STAMP, "parts.velocity_mps", "parts.phase", "parts.on_track"],
+    PART_STATE_ARRAY: [
+        *_STAMP,
+        "parts.part_id",
+        "parts.position_m",
+        "parts.phase",
+        "parts.on_track",
+    ],
     PART_SENSOR_EVENT: [*_STAMP, "sensor_index", "sensor_position_m", "part_id", "present"],
     PART_EXIT: [*_STAMP, "part_id"],
+    **run_log.REQUESTS,
 }
 FEEDER_TYPES = frozenset([*REQUESTS, DIAGNOSTIC_ARRAY])
 
@@ -100,6 +110,7 @@ class _FeederRun:
     """One feeder's accumulation during the pass, and what it read."""
 
     acc: Accumulator = field(default_factory=Accumulator)
+    log: RunLog = field(default_factory=RunLog)  # speed status and drive state over time
     messages: dict[str, int] = field(default_factory=dict)  # per feeder type
     topics: dict[str, list[str]] = field(default_factory=dict)  # type -> topics
 
@@ -138,6 +149,7 @@ def _main_pass(
         if feeder is not None and (namespace is None or feeder == namespace):
             run = runs.setdefault(feeder, _FeederRun())
             run.acc.batch(batch)
+            run.log.add(batch)
             if run.acc.pending_count > PENDING_LIMIT:
                 run.acc.flush()
             run.messages[batch.type] = run.messages.get(batch.type, 0) + len(batch)
@@ -263,6 +275,13 @@ def _feeder_result(
         "carrier state" if acc.state.times else "drive command" if acc.command.times else "none"
     )
     found = segments(acc, acc.t_min, acc.t_max, min_segment_s)
+    spans = [(s.start_s, s.end_s) for s in found]
+    for s, target in zip(found, targets(run.log, spans, acc.t_min), strict=True):
+        s.target_speed_mps = target
+    fed = sum(s.parts_exited for s in found)  # ramps' exits too
+    result.figures = run_figures(run.log, acc.t_min, acc.t_max, fed)
+    result.speed_status = run.log.series(SPEED_STATUS)
+    result.drive_state = run.log.series(DRIVE_STATE)
     result.transient_segments = sum(s.transient for s in found)
     result.segments = [s for s in found if not s.transient]
     for i, s in enumerate(result.segments):

@@ -1,5 +1,6 @@
-"""Presentation of :mod:`feeder_ros.bag.analysis` results: terminal tables, CSV, JSON, PNG plots
-(matplotlib, Agg backend) and one self-contained HTML report (images embedded as base64).
+"""``feeder analyze``'s outputs: the terminal summary, CSV, JSON, PNG plots and one self-contained
+HTML report (images embedded as base64). The summary and the report lay out the same sections
+(:mod:`feeder_ros.bag.presentation`); the plots are :mod:`feeder_ros.bag.report_plots`'.
 
 One section per analysed feeder. A bag holding several feeders gives one section per feeder,
 headed ``<bag> [<namespace>]``, and one set of files each, named ``<bag>_<namespace>_*``
@@ -20,32 +21,13 @@ from pathlib import Path
 from typing import Any
 
 from feeder_ros.atomic_files import atomic_bytes
+from feeder_ros.bag import presentation, report_plots
 from feeder_ros.bag.analysis import BagAnalysis
+from feeder_ros.bag.presentation import Section
+
+_TERMINAL_DIAGNOSTICS = 50  # level changes listed in the terminal (all of them in the report)
 
 __all__ = ["comparison_rows", "format_summary", "segment_rows", "write_outputs"]
-
-SEGMENT_COLUMNS = [
-    ("start [s]", "start_s", "{:.3f}"),
-    ("end [s]", "end_s", "{:.3f}"),
-    ("f [Hz]", "frequency_hz", "{:g}"),
-    ("A [N]", "amplitude_n", "{:g}"),
-    ("speed [mm/s]", "speed_mm_s", "{:.4g}"),
-    ("speed est [mm/s]", "speed_estimate_mm_s", "{:.4g}"),
-    ("speed truth [mm/s]", "speed_ground_truth_mm_s", "{:.4g}"),
-    ("speed sensors [mm/s]", "speed_sensors_mm_s", "{:.4g}"),
-    ("slip est", "slip_estimate", "{:.3f}"),
-    ("slip truth", "slip_ground_truth", "{:.3f}"),
-    ("exits", "parts_exited", "{:d}"),
-    ("feed [1/min]", "feed_rate_per_min", "{:.3g}"),
-]
-
-
-def _fmt(value: Any, pattern: str) -> str:
-    if value is None:
-        return "-"
-    if isinstance(value, float) and math.isnan(value):
-        return "-"
-    return pattern.format(value)
 
 
 def segment_rows(analysis: BagAnalysis) -> list[dict[str, Any]]:
@@ -59,6 +41,7 @@ def segment_rows(analysis: BagAnalysis) -> list[dict[str, Any]]:
                 "frequency_hz": s.frequency_hz,
                 "amplitude_n": s.amplitude_n,
                 "speed_mm_s": s.speed_mps * 1e3,
+                "target_speed_mm_s": s.target_speed_mps * 1e3,
                 "speed_estimate_mm_s": s.speed_estimate_mps * 1e3,
                 "speed_ground_truth_mm_s": s.speed_ground_truth_mps * 1e3,
                 "speed_sensors_mm_s": s.speed_sensors_mps * 1e3,
@@ -89,20 +72,14 @@ def comparison_rows(analyses: Sequence[BagAnalysis]) -> list[dict[str, Any]]:
                 "parts_exited": int(totals.get("parts_exited", 0)),
                 "feed_rate_per_min": totals.get("feed_rate_per_min", math.nan),
                 "lost_messages": "" if a.loss is None else a.loss.lost,
+                "at_target_percent": math.nan
+                if a.figures is None
+                else 100.0 * a.figures.at_target_share,
                 "problems": len(a.problems),
                 "error": a.error or "",
             }
         )
     return rows
-
-
-def _lost_topics(a: BagAnalysis) -> str:
-    """The topics that lost messages, "/a/imu 20 of 500, ..." (with several feeders in the bag,
-    this feeder's; the bag's total is in ``loss_summary``)."""
-    if a.loss is None:
-        return ""
-    topics = [t for t in a.loss.lost_topics() if a.owns(t.topic)]
-    return ", ".join(f"{t.topic} {t.lost} of {t.recorded}" for t in topics)
 
 
 def _status(a: BagAnalysis) -> str:
@@ -113,101 +90,24 @@ def _status(a: BagAnalysis) -> str:
     return "cut short" if a.cut_short else "ok"
 
 
-def _table(headers: Sequence[str], rows: Sequence[Sequence[str]]) -> str:
-    widths = [max(len(h), *(len(r[i]) for r in rows)) for i, h in enumerate(headers)]
-    line = "  ".join(h.rjust(w) for h, w in zip(headers, widths, strict=True))
-    out = [line, "  ".join("-" * w for w in widths)]
-    out += ["  ".join(c.rjust(w) for c, w in zip(r, widths, strict=True)) for r in rows]
-    return "\n".join(out)
-
-
 def format_summary(analyses: Sequence[BagAnalysis]) -> str:
-    """The terminal summary: per bag its segments, sweep and diagnostics, then a comparison."""
+    """The terminal summary: per feeder what the bag is, its headline figures and tables (the
+    report's, from :mod:`feeder_ros.bag.presentation`), then a comparison of several."""
     parts: list[str] = []
-    for a in analyses:
-        if not a.ok:
-            parts.append(f"{a.label}: cannot analyse: {a.error}")
+    for section in presentation.sections(analyses, diagnostics_limit=_TERMINAL_DIAGNOSTICS):
+        if section.error:
+            parts.append(f"{section.title}: {section.error}")
             continue
-        head = (
-            f"{a.label}: {a.duration_s:.3f} s, drive from {a.drive_source}, "
-            f"{len(a.segments)} segment(s)"
-            + (f" (+{a.transient_segments} transient)" if a.transient_segments else "")
-            + (", CUT SHORT (a file ends without its summary)" if a.cut_short else "")
-        )
-        parts.append(head)
-        if a.data_lost:
-            parts.append(
-                f"  DATA LOST: {a.loss_summary()}: counts, exits and feed rates are short "
-                "(see the problems below)"
-            )
-            lost_topics = _lost_topics(a)
-            if lost_topics:
-                parts.append(f"  lost per topic: {lost_topics}")
-        elif a.loss is not None and not a.loss.exact:
-            parts.append(f"  messages recorded: unknown ({'; '.join(a.loss.unknown)})")
-        counts = ", ".join(f"{k.rsplit('/', 1)[-1]} {v}" for k, v in sorted(a.messages.items()))
-        if counts:
-            parts.append(f"  messages: {counts}")
-        if a.segments:
-            rows = segment_rows(a)
-            parts.append(
-                _table(
-                    ["#"] + [c[0] for c in SEGMENT_COLUMNS],
-                    [
-                        [str(r["segment"])] + [_fmt(r[key], pat) for _, key, pat in SEGMENT_COLUMNS]
-                        for r in rows
-                    ],
-                )
-            )
-        if a.frequency_response:
-            parts.append("  frequency response:")
-            parts.append(
-                _table(
-                    ["A [N]", "f [Hz]", "time [s]", "speed [mm/s]", "slip", "feed [1/min]"],
-                    [
-                        [
-                            f"{p.amplitude_n:g}",
-                            f"{p.frequency_hz:g}",
-                            f"{p.duration_s:.2f}",
-                            _fmt(p.speed_mps * 1e3, "{:.4g}"),
-                            _fmt(p.slip_fraction, "{:.3f}"),
-                            _fmt(p.feed_rate_per_min, "{:.3g}"),
-                        ]
-                        for p in a.frequency_response
-                    ],
-                )
-            )
-        if a.diagnostics:
-            parts.append("  diagnostics (level changes):")
-            parts += [
-                f"    {d.t_s:10.3f} s  {d.level_name:<5}  {d.name}: {d.message}"
-                for d in a.diagnostics[:50]
-            ]
-            if len(a.diagnostics) > 50:
-                parts.append(f"    ... {len(a.diagnostics) - 50} more (see the CSV/JSON)")
-        for problem in a.problems:
-            parts.append(f"  problem: {problem}")
+        parts += section.lines
+        parts += [f"  {alert}" for alert in section.alerts]
+        if section.headline:
+            width = max(len(f.label) for f in section.headline)
+            parts += [f"  {f.label + ':':<{width + 1}} {f.value}" for f in section.headline]
+        for table in section.tables:
+            parts += [f"  {table.title}:", presentation.text_table(table, indent="    ")]
+        parts += [f"  problem: {problem}" for problem in section.problems]
     if len(analyses) > 1:
-        parts.append("comparison:")
-        rows = comparison_rows(analyses)
-        parts.append(
-            _table(
-                ["bag", "status", "time [s]", "segments", "speed [mm/s]", "slip", "exits", "feed"],
-                [
-                    [
-                        r["bag"] + (f" [{r['namespace']}]" if r["namespace"] else ""),
-                        r["status"],
-                        _fmt(r["duration_s"], "{:.2f}"),
-                        str(r["segments"]),
-                        _fmt(r["speed_mm_s"], "{:.4g}"),
-                        _fmt(r["slip_fraction"], "{:.3f}"),
-                        str(r["parts_exited"]),
-                        _fmt(r["feed_rate_per_min"], "{:.3g}"),
-                    ]
-                    for r in rows
-                ],
-            )
-        )
+        parts += ["comparison:", presentation.text_table(presentation.comparison_table(analyses))]
     return "\n".join(parts)
 
 
@@ -245,86 +145,77 @@ def _stems(analyses: Sequence[BagAnalysis]) -> list[str]:
     return stems
 
 
-_COLORS = {"ground truth": "C0", "sensor transits": "C1", "estimator": "C2"}
+_STYLE = """
+body{font-family:system-ui,sans-serif;max-width:1240px;margin:0 auto;padding:0 16px;color:#222}
+h1{font-size:1.6em}h2{margin-top:2em;border-bottom:2px solid #ccc;overflow-wrap:anywhere}
+p.bag{color:#555;margin:.2em 0;overflow-wrap:anywhere}.alert{color:#b00;font-weight:bold}
+dl.headline{display:flex;flex-wrap:wrap;gap:10px;margin:1em 0}
+dl.headline div{border:1px solid #ccc;border-radius:6px;padding:8px 14px;min-width:140px}
+dl.headline dt{font-size:.85em;color:#555}dl.headline dd{margin:0;font-size:1.35em}
+table{border-collapse:collapse;max-width:100%;margin:.5em 0 1.5em;font-size:.9em}
+th,td{border:1px solid #ccc;padding:3px 6px;vertical-align:top}th{background:#f3f3f3}
+.num{text-align:right;font-variant-numeric:tabular-nums;white-space:nowrap}th.num{white-space:normal}
+.text{text-align:left;white-space:nowrap}.wrap{text-align:left;overflow-wrap:anywhere}img{max-width:100%;height:auto}
+"""
 
 
-def _plots(a: BagAnalysis) -> dict[str, bytes]:
-    """PNG images of one bag: speed and slip per segment; the frequency response."""
-    import matplotlib
+def _html_section(section: Section, images: dict[str, bytes]) -> list[str]:
+    out = [f"<section><h2>{html.escape(section.title)}</h2>"]
+    if section.error:
+        return [*out, f"<p class='alert'>{html.escape(section.error)}</p></section>"]
+    out += [f"<p class='bag'>{html.escape(line.strip())}</p>" for line in section.lines]
+    out += [f"<p class='alert'>{html.escape(alert)}</p>" for alert in section.alerts]
+    if section.headline:
+        out.append("<dl class='headline'>")
+        out += [
+            f"<div data-key='{f.key}'><dt>{html.escape(f.label)}</dt>"
+            f"<dd>{html.escape(f.value)}</dd></div>"
+            for f in section.headline
+        ]
+        out.append("</dl>")
 
-    matplotlib.use("Agg")
-    from matplotlib.figure import Figure
-
-    images: dict[str, bytes] = {}
-    if a.segments:
-        fig = Figure(figsize=(8, 5), layout="constrained")
-        ax_speed, ax_slip = fig.subplots(2, 1, sharex=True)
-        for label, attr in (
-            ("ground truth", "speed_ground_truth_mps"),
-            ("sensor transits", "speed_sensors_mps"),
-            ("estimator", "speed_estimate_mps"),
-        ):
-            xs: list[float] = []
-            ys: list[float] = []
-            for s in a.segments:
-                xs += [s.start_s, s.end_s, math.nan]
-                v = getattr(s, attr) * 1e3
-                ys += [v, v, math.nan]
-            if any(not math.isnan(y) for y in ys):
-                ax_speed.plot(xs, ys, label=label, color=_COLORS[label])
-        ax_speed.set_ylabel("mean part speed [mm/s]")
-        if ax_speed.lines:
-            ax_speed.legend(loc="best", fontsize="small")
-        ax_speed.set_title(f"{a.name}: segments of constant drive")
-        for label, attr in (("ground truth", "slip_ground_truth"), ("estimator", "slip_estimate")):
-            xs, ys = [], []
-            for s in a.segments:
-                xs += [s.start_s, s.end_s, math.nan]
-                ys += [getattr(s, attr)] * 2 + [math.nan]
-            if any(not math.isnan(y) for y in ys):
-                ax_slip.plot(xs, ys, label=label, color=_COLORS[label])
-        if ax_slip.lines:
-            ax_slip.legend(loc="best", fontsize="small")
-        ax_slip.set_ylabel("slip fraction")
-        ax_slip.set_xlabel("time [s]")
-        images["segments"] = _png(fig)
-    if a.frequency_response:
-        fig = Figure(figsize=(8, 4), layout="constrained")
-        ax = fig.subplots()
-        for amp in sorted({p.amplitude_n for p in a.frequency_response}):
-            pts = [p for p in a.frequency_response if p.amplitude_n == amp]
-            ax.plot(
-                [p.frequency_hz for p in pts],
-                [p.speed_mps * 1e3 for p in pts],
-                marker="o",
-                label=f"A = {amp:g} N",
+    def image(kind: str, title: str) -> None:
+        if kind in images:
+            encoded = base64.b64encode(images[kind]).decode()
+            out.extend(
+                [f"<h3>{title}</h3>", f"<img alt='{kind}' src='data:image/png;base64,{encoded}'>"]
             )
-        ax.set_xlabel("drive frequency [Hz]")
-        ax.set_ylabel("mean part speed [mm/s]")
-        ax.set_title(f"{a.name}: frequency response")
-        ax.legend(loc="best", fontsize="small")
-        images["frequency_response"] = _png(fig)
-    return images
+
+    image("timeline", "Part speed and drive over time")
+    for table in section.tables:
+        out += [f"<h3>{html.escape(table.title)}</h3>", presentation.html_table(table)]
+    image("segments", "Speed and slip per segment")
+    image("frequency_response", "Frequency response")
+    if section.problems:
+        out.append("<h3>Problems</h3><ul>")
+        out += [f"<li>{html.escape(p)}</li>" for p in section.problems]
+        out.append("</ul>")
+    return [*out, "</section>"]
 
 
-def _png(fig: Any) -> bytes:
-    buffer = io.BytesIO()
-    fig.savefig(buffer, format="png", dpi=100)
-    return buffer.getvalue()
-
-
-def _html_table(rows: Sequence[dict[str, Any]]) -> str:
-    if not rows:
-        return "<p>(none)</p>"
-    head = "".join(f"<th>{html.escape(str(k))}</th>" for k in rows[0])
-    body = []
-    for r in rows:
-        cells = []
-        for v in r.values():
-            text = _fmt(v, "{:.6g}") if isinstance(v, float) else ("-" if v is None else str(v))
-            cells.append(f"<td>{html.escape(text)}</td>")
-        body.append("<tr>" + "".join(cells) + "</tr>")
-    return f"<table><tr>{head}</tr>{''.join(body)}</table>"
+def _csv_files(a: BagAnalysis) -> dict[str, bytes]:
+    """One feeder's machine-readable tables (full precision, SI-named columns)."""
+    files = {"segments.csv": _csv(segment_rows(a))}
+    if a.frequency_response:
+        fr = [
+            {
+                "amplitude_n": p.amplitude_n,
+                "frequency_hz": p.frequency_hz,
+                "duration_s": p.duration_s,
+                "speed_mm_s": p.speed_mps * 1e3,
+                "slip_fraction": p.slip_fraction,
+                "feed_rate_per_min": p.feed_rate_per_min,
+            }
+            for p in a.frequency_response
+        ]
+        files["frequency_response.csv"] = _csv(fr)
+    if a.diagnostics:
+        diag = [
+            {"t_s": d.t_s, "name": d.name, "level": d.level_name, "message": d.message}
+            for d in a.diagnostics
+        ]
+        files["diagnostics.csv"] = _csv(diag)
+    return files
 
 
 def write_outputs(analyses: Sequence[BagAnalysis], directory: Path) -> list[Path]:
@@ -337,69 +228,29 @@ def write_outputs(analyses: Sequence[BagAnalysis], directory: Path) -> list[Path
         atomic_bytes(path, data)
         written.append(path)
 
-    sections: list[str] = []
-    for stem, a in zip(_stems(analyses), analyses, strict=True):
-        sections.append(f"<h2>{html.escape(a.label)}</h2>")
-        if not a.ok:
-            sections.append(f"<p class='error'>cannot analyse: {html.escape(a.error or '')}</p>")
-            continue
-        sections.append(
-            f"<p>{a.duration_s:.3f} s; drive from {html.escape(a.drive_source)}; "
-            f"{len(a.segments)} segment(s)" + (", <b>cut short</b>" if a.cut_short else "") + "</p>"
-        )
-        if a.data_lost:
-            lost_topics = _lost_topics(a)
-            sections.append(
-                f"<p class='error'><b>Data lost</b>: {html.escape(a.loss_summary())}: counts, "
-                "exits and feed rates are short"
-                + (f" (per topic: {html.escape(lost_topics)})" if lost_topics else "")
-                + ".</p>"
-            )
-        rows = segment_rows(a)
-        put(f"{stem}_segments.csv", _csv(rows))
-        sections += ["<h3>Segments</h3>", _html_table(rows)]
-        if a.frequency_response:
-            fr = [
-                {
-                    "amplitude_n": p.amplitude_n,
-                    "frequency_hz": p.frequency_hz,
-                    "duration_s": p.duration_s,
-                    "speed_mm_s": p.speed_mps * 1e3,
-                    "slip_fraction": p.slip_fraction,
-                    "feed_rate_per_min": p.feed_rate_per_min,
-                }
-                for p in a.frequency_response
-            ]
-            put(f"{stem}_frequency_response.csv", _csv(fr))
-            sections += ["<h3>Frequency response</h3>", _html_table(fr)]
-        diag = [
-            {"t_s": d.t_s, "name": d.name, "level": d.level_name, "message": d.message}
-            for d in a.diagnostics
-        ]
-        if diag:
-            put(f"{stem}_diagnostics.csv", _csv(diag))
-            sections += ["<h3>Diagnostics (level changes)</h3>", _html_table(diag)]
-        for kind, png in _plots(a).items():
-            put(f"{stem}_{kind}.png", png)
-            encoded = base64.b64encode(png).decode()
-            sections.append(f"<img alt='{kind}' src='data:image/png;base64,{encoded}'>")
-        if a.problems:
-            sections.append("<h3>Problems</h3><ul>")
-            sections += [f"<li>{html.escape(p)}</li>" for p in a.problems]
-            sections.append("</ul>")
+    body: list[str] = []
+    shown = presentation.sections(analyses)
+    for stem, a, section in zip(_stems(analyses), analyses, shown, strict=True):
+        images: dict[str, bytes] = {}
+        if a.ok:
+            for name, data in _csv_files(a).items():
+                put(f"{stem}_{name}", data)
+            images = report_plots.plots(a)
+            for kind, png in images.items():
+                put(f"{stem}_{kind}.png", png)
+        body += _html_section(section, images)
     comparison = comparison_rows(analyses)
     put("comparison.csv", _csv(comparison))
     if len(analyses) > 1:
-        sections += ["<h2>Comparison</h2>", _html_table(comparison)]
+        table = presentation.comparison_table(analyses)
+        body += ["<section><h2>Comparison</h2>", presentation.html_table(table), "</section>"]
     document = {"bags": [_json_safe(a.as_dict()) for a in analyses]}
     put("analysis.json", (json.dumps(document, indent=1) + "\n").encode())
     page = (
-        "<!DOCTYPE html><html><head><meta charset='utf-8'><title>feeder analyze</title><style>"
-        "body{font-family:sans-serif;margin:2em}table{border-collapse:collapse}"
-        "td,th{border:1px solid #bbb;padding:2px 6px;text-align:right}"
-        ".error{color:#b00}img{max-width:100%}</style></head><body><h1>Feeder bag analysis</h1>"
-        + "\n".join(sections)
-        + "</body></html>\n"
+        "<!DOCTYPE html><html lang='en'><head><meta charset='utf-8'>"
+        "<meta name='viewport' content='width=device-width, initial-scale=1'>"
+        f"<title>feeder analyze</title><style>{_STYLE}</style></head><body>"
+        "<h1>Feeder run report</h1>" + "\n".join(body) + "</body></html>\n"
     )
     put("report.html", page.encode())
     return written

@@ -11,11 +11,14 @@ import math
 from collections.abc import Iterable, Sequence
 from dataclasses import asdict, dataclass, field
 from pathlib import Path
-from typing import Any
+from typing import TYPE_CHECKING, Any
 
 from feeder_ros.bag.errors import BagError, BagProblem
 from feeder_ros.bag.feeders import namespace_slug, owner
 from feeder_ros.bag.loss import LossCount
+
+if TYPE_CHECKING:  # run_log reads stamps through the accumulator, which builds Segments
+    from feeder_ros.bag.run_log import RunFigures, Series
 
 __all__ = [
     "AnalysisError",
@@ -62,6 +65,8 @@ class Segment:
     parts_exited: int = 0
     feed_rate_per_min: float = math.nan
     transient: bool = False
+    #: the speed monitor's target during the segment (``speed/status``; NaN: none set)
+    target_speed_mps: float = math.nan
 
     @property
     def duration_s(self) -> float:
@@ -149,6 +154,11 @@ class BagAnalysis:
     #: the bag's recorded against its readable messages (the whole bag, every feeder's topics)
     loss: LossCount | None = None
     error: str | None = None
+    #: the run as the cell saw it (``speed/status``, ``drive/state``): headline figures, and the
+    #: two streams for the plots (None where the bag lacks them)
+    figures: RunFigures | None = None
+    speed_status: Series | None = None
+    drive_state: Series | None = None
 
     @property
     def shared(self) -> bool:
@@ -264,12 +274,20 @@ class BagAnalysis:
             "messages": dict(self.messages),
             "topics": {k: list(v) for k, v in self.topics.items()},
             "totals": self.totals(),
+            "headline": None if self.figures is None else _figures_dict(self.figures),
             "transient_segments": self.transient_segments,
             "segments": [s.as_dict() for s in self.segments],
             "frequency_response": [asdict(p) for p in self.frequency_response],
             "diagnostics": [{**asdict(d), "level_name": d.level_name} for d in self.diagnostics],
             "problems": list(self.problems),
         }
+
+
+def _figures_dict(figures: RunFigures) -> dict[str, Any]:
+    data = asdict(figures)
+    data["at_target_share"] = figures.at_target_share
+    data["faults"] = [{**asdict(f), "duration_s": f.duration_s} for f in figures.faults]
+    return data
 
 
 _LOSS_WORDS = {

@@ -100,6 +100,7 @@ def write_feeder_bag(
 
         exits_done = [0, 0, 0]
         total_exits = 0
+        positions = [0.0, 0.0]  # the truth's parts, moved at their segment's speeds
         for k in range(5000):  # 1 ms steps
             t_ns = T0 + k * MS
             t_s = k * 1e-3
@@ -135,9 +136,15 @@ def write_feeder_bag(
                 speeds, phases = TRUTH[seg]
                 parts = PartStateArray()
                 for i in range(2):
+                    if k:
+                        positions[i] += speeds[i] * 0.01  # over the 10 ms up to this sample
                     parts.parts.append(
                         PartState(
-                            part_id=i + 1, velocity_mps=speeds[i], phase=phases[i], on_track=True
+                            part_id=i + 1,
+                            position_m=positions[i],
+                            velocity_mps=speeds[i],
+                            phase=phases[i],
+                            on_track=True,
                         )
                     )
                 parts.parts.append(PartState(part_id=9, velocity_mps=5.0, phase=1, on_track=False))
@@ -668,3 +675,28 @@ def test_only_a_foreign_definition_is_an_error(tmp_path: Path) -> None:
         w.write("/f/parts/exit", cdr(stamp(PartExit(part_id=1), T0)), T0)
     with pytest.raises(AnalysisError, match=r"no usable feeder data; \[foreign_definition\]"):
         analyze_bag(path)
+
+
+def test_the_truth_is_the_parts_displacement_not_their_sampled_velocity(tmp_path: Path) -> None:
+    """Part states at 50 Hz of a part whose velocity swings at 150 Hz (the 5th harmonic of a
+    30 Hz drive cycle) about its mean V: every sample lands on the swing's crest, so the mean
+    of the sampled velocities is 2 V; the mean speed, displacement over time, is V."""
+    mean = 0.008
+    with BagWriter(tmp_path / "bag") as w:
+        w.add_topic("/f/drive/command", "feeder_ros/msg/DriveCommand")
+        w.add_topic("/f/parts/state", "feeder_ros/msg/PartStateArray")
+        command = DriveCommand(enabled=True, frequency_hz=30.0, amplitude_n=20.0)
+        w.write("/f/drive/command", cdr(stamp(command, T0)), T0)
+        for k in range(201):  # 4 s at 50 Hz
+            t = k / 50
+            w_t = 2 * math.pi * 150.0 * t
+            part = PartState(
+                part_id=1,
+                position_m=mean * t + mean * math.sin(w_t) / (2 * math.pi * 150.0),
+                velocity_mps=mean * (1.0 + math.cos(w_t)),
+                on_track=True,
+            )
+            t_ns = T0 + k * 20 * MS
+            w.write("/f/parts/state", cdr(stamp(PartStateArray(parts=[part]), t_ns)), t_ns)
+    [segment] = analyze_bag(tmp_path / "bag").segments
+    assert segment.speed_ground_truth_mps == pytest.approx(mean, rel=1e-9)

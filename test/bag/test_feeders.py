@@ -114,7 +114,12 @@ def write_two_feeders(path: Path) -> dict[str, int]:
                     put(f"{ns}/estimate", VehicleEstimate(mean_speed_mps=spec["speed"]), t_ns)
                     parts = PartStateArray()
                     parts.parts = [
-                        PartState(part_id=i, velocity_mps=spec["speed"], on_track=True)
+                        PartState(
+                            part_id=i,
+                            position_m=spec["speed"] * k * 1e-3,  # moving at its speed
+                            velocity_mps=spec["speed"],
+                            on_track=True,
+                        )
                         for i in (1, 2)
                     ]
                     put(f"{ns}/parts/state", parts, t_ns)

@@ -51,7 +51,7 @@ def plan_at(t_s: float) -> tuple[float, float, float]:
 
 def write_sweep_bag(path: Path, truth: bool = True, sensors: bool = False) -> None:
     """The SWEEP above: carrier state at 100 Hz; with ``truth`` two parts' states at 50 Hz
-    (velocities speed -+ 1 mm/s: their mean is the speed); with ``sensors`` one part per steady
+    (moving at speed -+ 1 mm/s: their mean is the speed); with ``sensors`` one part per steady
     point timed over 5 mm at exactly the point's speed."""
     total_ms = round(sum(d for d, *_ in SWEEP) * 1000)
     with BagWriter(path) as writer:
@@ -77,16 +77,25 @@ def write_sweep_bag(path: Path, truth: bool = True, sensors: bool = False) -> No
                             )
                             events.append((T0 + round((start + at) * S), event))
                 start += duration
+        places = [0.0, 0.0]  # the two parts' positions, moved at their speeds
         for k in range(0, total_ms, 10):
             t_ns = T0 + k * MS
             frequency, amplitude, speed = plan_at(k / 1000)
             state = CarrierState(drive_frequency_hz=frequency, drive_amplitude_n=amplitude)
             put("carrier/state", state, t_ns)
             if truth and k % 20 == 0:
+                velocities = (speed - 0.001, speed + 0.001)
+                if k:  # over the 20 ms up to this sample
+                    places = [x + v * 0.02 for x, v in zip(places, velocities, strict=True)]
                 parts = PartStateArray(
                     parts=[
-                        PartState(part_id=1, velocity_mps=speed - 0.001, on_track=True),
-                        PartState(part_id=2, velocity_mps=speed + 0.001, on_track=True),
+                        PartState(
+                            part_id=i + 1,
+                            position_m=places[i],
+                            velocity_mps=velocities[i],
+                            on_track=True,
+                        )
+                        for i in (0, 1)
                     ]
                 )
                 put("parts/state", parts, t_ns)
