@@ -34,6 +34,7 @@ from feeder_ros.estimation.stick_slip_observer import PartModel
 from feeder_ros.estimation.vehicle_estimator import (
     EstimatorConfig,
     VehicleEstimator,
+    load_kernels,
 )
 from feeder_ros.estimation.vehicle_estimator import VehicleEstimate as EstimateRecord
 from feeder_ros.msg import AccelerometerBatch, CarrierState, DriveCommand, VehicleEstimate
@@ -274,7 +275,13 @@ def _build_estimator(values: dict[str, Any], belief: PartBelief | None = None) -
 
 class VehicleEstimatorNode(Node):
     def __init__(self, **kwargs: Any) -> None:
+        # before the node joins the graph: a cell waits for it, and its first estimates then
+        # come without a stall (see load_kernels)
+        loading = time.monotonic()
+        load_kernels()
+        loaded_s = time.monotonic() - loading
         super().__init__(INTERFACE.node_name, **kwargs)
+        self.get_logger().debug(f"estimator kernels loaded in {loaded_s:.2f} s")
         self._values = declare_parameters(self, PARAMETERS.values(), DEFAULTS)
         _check_combination(self._values)
         self.add_on_set_parameters_callback(
