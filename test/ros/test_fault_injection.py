@@ -138,6 +138,17 @@ def running_cell(tmp_path: Path, namespace: str) -> Iterator[tuple[FaultCell, Se
                     ),
                     60.0,
                 ), f"the monitor never heard an estimate: {seen.latest(monitor)}"
+                # and the drive has heard the simulator (a simulator it never heard it cannot
+                # report lost: it waits for its first parts/state, a WARN): discovery can match
+                # the estimate's readers before the drive's reader of parts/state
+                drive = cell.status_name("drive_interface", "drive")
+                assert wait_until(
+                    lambda: (
+                        (latest := seen.latest(drive)) is not None
+                        and latest[2].get("simulator silent for s", "never heard") != "never heard"
+                    ),
+                    60.0,
+                ), f"the drive never heard the simulator: {seen.latest(drive)}"
                 yield cell, seen, controller
             finally:
                 executor.remove_node(controller)
