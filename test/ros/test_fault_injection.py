@@ -132,22 +132,15 @@ def running_cell(tmp_path: Path, namespace: str) -> Iterator[tuple[FaultCell, Se
                 _drive(controller)
                 monitor = cell.status_name("speed_monitor", "part speed")
                 assert wait_until(
-                    lambda: (
-                        (latest := seen.latest(monitor)) is not None
-                        and latest[2].get("last_estimate_confidence", "nan") != "nan"
-                    ),
-                    60.0,
+                    lambda: _value(seen, monitor, "last_estimate_confidence", "nan") != "nan", 60.0
                 ), f"the monitor never heard an estimate: {seen.latest(monitor)}"
                 # and the drive has heard the simulator (a simulator it never heard it cannot
                 # report lost: it waits for its first parts/state, a WARN): discovery can match
                 # the estimate's readers before the drive's reader of parts/state
                 drive = cell.status_name("drive_interface", "drive")
+                silent = "simulator silent for s"
                 assert wait_until(
-                    lambda: (
-                        (latest := seen.latest(drive)) is not None
-                        and latest[2].get("simulator silent for s", "never heard") != "never heard"
-                    ),
-                    60.0,
+                    lambda: _value(seen, drive, silent, "?") not in ("?", "never heard"), 60.0
                 ), f"the drive never heard the simulator: {seen.latest(drive)}"
                 yield cell, seen, controller
             finally:
@@ -155,6 +148,12 @@ def running_cell(tmp_path: Path, namespace: str) -> Iterator[tuple[FaultCell, Se
                 controller.destroy_node()
     finally:
         cell.stop_all()
+
+
+def _value(seen: Seen, name: str, key: str, missing: str) -> str:
+    """The value ``key`` of the latest status ``name`` (``missing`` if none or not in it)."""
+    latest = seen.latest(name)
+    return missing if latest is None else latest[2].get(key, missing)
 
 
 def _drive(controller: Any) -> None:

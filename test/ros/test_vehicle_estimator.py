@@ -450,6 +450,15 @@ def test_the_calibration_worker_ends_before_the_node_is_destroyed() -> None:
         rclpy.shutdown(context=context)
 
 
+def _carrier_imu(t: float) -> Imu:
+    """An accelerometer sample at ``t`` [s] of a carrier vibrating at 25 Hz, 3 m/s^2."""
+    message = Imu()
+    message.header.stamp.sec = int(t)
+    message.header.stamp.nanosec = round((t - int(t)) * 1e9)
+    message.linear_acceleration.x = 3.0 * math.sin(2 * math.pi * 25.0 * t)
+    return message
+
+
 def test_its_own_stall_is_no_sensor_timeout_but_silence_is() -> None:
     """The estimator process stopped for 2.6 s (input_timeout_s is 1 s) while the accelerometer
     keeps sending: no sensor timeout once it runs again. Samples that really stop raise it."""
@@ -478,12 +487,7 @@ def test_its_own_stall_is_no_sensor_timeout_but_silence_is() -> None:
             k = 0
             while not stop.is_set():
                 for _ in range(10 if sending.is_set() else 0):
-                    t = 1000.0 + k / 200.0
-                    message = Imu()
-                    message.header.stamp.sec = int(t)
-                    message.header.stamp.nanosec = round((t - int(t)) * 1e9)
-                    message.linear_acceleration.x = 3.0 * math.sin(2 * math.pi * 25.0 * t)
-                    imu.publish(message)
+                    imu.publish(_carrier_imu(1000.0 + k / 200.0))
                     k += 1
                 time.sleep(0.05)
 
@@ -535,12 +539,7 @@ def test_estimates_keep_their_rate_while_the_drive_repeats_its_command() -> None
             k = 0
             while not stop.is_set():
                 for _ in range(10):
-                    t = 1000.0 + k / 500.0
-                    message = Imu()
-                    message.header.stamp.sec = int(t)
-                    message.header.stamp.nanosec = round((t - int(t)) * 1e9)
-                    message.linear_acceleration.x = 3.0 * math.sin(2 * math.pi * 25.0 * t)
-                    imu.publish(message)
+                    imu.publish(_carrier_imu(1000.0 + k / 500.0))
                     k += 1
                 again = DriveCommand(enabled=True, frequency_hz=25.0, amplitude_n=10.0)
                 again.header.stamp.sec = 1000
