@@ -32,6 +32,7 @@ __all__ = [
     "duration",
     "html_table",
     "sections",
+    "status",
     "text_table",
 ]
 
@@ -327,6 +328,15 @@ def sections(
     return [section(a, diagnostics_limit) for a in analyses]
 
 
+def status(a: BagAnalysis) -> str:
+    """One word for a bag: error, data lost, cut short or ok."""
+    if not a.ok:
+        return "error"
+    if a.data_lost:
+        return "data lost"
+    return "cut short" if a.cut_short else "ok"
+
+
 def comparison_table(analyses: Sequence[BagAnalysis]) -> Table:
     rows = []
     for a in analyses:
@@ -335,13 +345,7 @@ def comparison_table(analyses: Sequence[BagAnalysis]) -> Table:
         rows.append(
             [
                 a.label,
-                "error"
-                if not a.ok
-                else "data lost"
-                if a.data_lost
-                else "cut short"
-                if a.cut_short
-                else "ok",
+                status(a),
                 duration(totals.get("duration_s", math.nan)),
                 str(len(a.segments)),
                 _mm(totals.get("speed_mps", math.nan)),

@@ -64,7 +64,7 @@ def comparison_rows(analyses: Sequence[BagAnalysis]) -> list[dict[str, Any]]:
             {
                 "bag": str(a.path),
                 "namespace": a.namespace or "",
-                "status": _status(a),
+                "status": presentation.status(a),
                 "duration_s": totals.get("duration_s", math.nan),
                 "segments": len(a.segments),
                 "speed_mm_s": totals.get("speed_mps", math.nan) * 1e3,
@@ -80,14 +80,6 @@ def comparison_rows(analyses: Sequence[BagAnalysis]) -> list[dict[str, Any]]:
             }
         )
     return rows
-
-
-def _status(a: BagAnalysis) -> str:
-    if not a.ok:
-        return "error"
-    if a.data_lost:
-        return "data lost"
-    return "cut short" if a.cut_short else "ok"
 
 
 def format_summary(analyses: Sequence[BagAnalysis]) -> str:

@@ -97,17 +97,25 @@ class RunLog:
             SPEED_STATUS: [],
             DRIVE_STATE: [],
         }
+        self._series: dict[str, Series | None] = {}
 
     def add(self, batch: ColumnBatch) -> None:
         if batch.type not in self._batches or len(batch) == 0:
             return
+        self._series.pop(batch.type, None)
         fields = _SPEED_FIELDS if batch.type == SPEED_STATUS else _DRIVE_FIELDS
         self._batches[batch.type].append(
             (stamps(batch), {name: np.asarray(batch[name]) for name in fields})
         )
 
     def series(self, kind: str) -> Series | None:
-        """The stream of ``kind`` (SPEED_STATUS or DRIVE_STATE) in time order; None if absent."""
+        """The stream of ``kind`` (SPEED_STATUS or DRIVE_STATE) in time order; None if absent.
+        Built once, after the last :meth:`add` (the figures, targets and plots all read it)."""
+        if kind not in self._series:
+            self._series[kind] = self._build(kind)
+        return self._series[kind]
+
+    def _build(self, kind: str) -> Series | None:
         parts = self._batches[kind]
         if not parts:
             return None
