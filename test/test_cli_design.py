@@ -24,7 +24,8 @@ SMALL = [
 def test_end_to_end_writes_the_report(tmp_path: Path, capsys: pytest.CaptureFixture[str]) -> None:
     out = tmp_path / "report"
     assert main(["design", *SMALL, "--output", str(out)]) == 0
-    printed = capsys.readouterr().out
+    captured = capsys.readouterr()
+    printed = captured.out
 
     record = json.loads((out / "design.json").read_text(encoding="utf-8"))
     assert record["objective"] == "max-speed"
@@ -57,6 +58,13 @@ def test_end_to_end_writes_the_report(tmp_path: Path, capsys: pytest.CaptureFixt
     assert set(built["probability_by_condition"]) == set(optimum["constraints"])
     assert f"every condition met in {100 * built['probability_all_conditions']:.0f} %" in printed
     assert built["robust"] == (built["probability_all_conditions"] >= 0.95)
+    # this optimum sits on the forward-stick edge: said on stderr, with the way out
+    assert built["robust"] is False
+    assert (
+        f"the optimum meets every condition in only {100 * built['probability_all_conditions']:.0f}"
+        " % of the plants within the tolerances (a robust design: >= 95 %): it works near its "
+        "nominal values only; the robust design above holds its conditions" in captured.err
+    )
 
     # the parameter file: the simulator's ros__parameters, loading back to the optimum
     params_file = out / "optimum_params.yaml"
@@ -81,6 +89,17 @@ def test_end_to_end_writes_the_report(tmp_path: Path, capsys: pytest.CaptureFixt
     for name, value in robust["best"]["variables"].items():
         assert getattr(robust_params, name) == value
     assert quantile < optimum["speed_mps"]  # the price of holding the conditions when built
+    # ... assessed as the optimum is: every condition in every draw, within the tolerances at least
+    as_built = robust["as_built"]
+    assert as_built["robust"] is True
+    assert set(as_built["probability_by_condition"].values()) == {1.0}
+    assert (
+        1.0
+        <= as_built["largest_tolerance_multiple"]
+        <= as_built["largest_tolerance_multiple_tried"]
+    )
+    assert as_built["speed_quantiles_mps"]["p5"] >= quantile * (1 - 1e-12)
+    assert "the robust design as built: 64 plants drawn" in printed
 
     with (out / "sensitivity.csv").open(newline="") as stream:
         rows = list(csv.DictReader(stream))
@@ -90,7 +109,7 @@ def test_end_to_end_writes_the_report(tmp_path: Path, capsys: pytest.CaptureFixt
         assert float(row["speed_mps"]) == optimum["speed_mps"]
         assert float(row["forward_margin"]) == optimum["forward_margin"]
         assert row["feasible_minus"] in ("0", "1")
-    for name in ("design_convergence.png", "design_speed_map.png"):
+    for name in ("design_convergence.png", "design_speed_map.png", "design_robust_map.png"):
         assert (out / name).read_bytes()[:8] == b"\x89PNG\r\n\x1a\n"
 
 

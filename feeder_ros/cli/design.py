@@ -9,8 +9,9 @@ evaluation window and the reference design (the paper's case study) are the desi
 part, window), and printed beside the optimum.
 
 ``--output DIR`` writes ``design.json`` (everything printed, plus the convergence history),
-``sensitivity.csv``, ``design_convergence.png``, ``design_speed_map.png`` (speed over the two
-variables it is most sensitive to), ``robust_params.yaml`` (the design that holds its conditions
+``sensitivity.csv``, ``design_convergence.png``, ``design_speed_map.png`` and
+``design_robust_map.png`` (speed over the two variables it is most sensitive to, through the
+optimum and the robust optimum), ``robust_params.yaml`` (the design that holds its conditions
 within the tolerances, :mod:`~feeder_ros.design.robust_search`) and ``optimum_params.yaml``, the
 optimum, each as the simulator's ``ros__parameters`` (``platform_simulator --ros-args
 --params-file DIR/optimum_params.yaml``, or ``feeder sim --config DIR/robust_params.yaml``).
@@ -195,11 +196,21 @@ def run(args: argparse.Namespace) -> int:
     rows = sensitivity_table(problem, result.params)
     built = assess(problem, result.params, design.tolerances)
     robust = _robust(problem, result, design, args.robust_generations, args.seed)
+    # the robust optimum under the same draws: its margin per condition and largest tolerance
+    robust_built = (
+        None
+        if robust is None or robust.best is None
+        else assess(problem, robust.best.params, design.tolerances)
+    )
     print(summary(result, reference, plant_label, args.seed))
     print(sensitivity_text(rows))
     print(robustness_text(built, design.tolerances))
     if robust is not None:
         print(robust_text(robust, problem, result.speed_mps))
+    if robust_built is not None:
+        print(robustness_text(robust_built, design.tolerances, "the robust design"))
+        for line in robust_built.warnings:
+            print(f"feeder design: warning: at the robust design, {line}", file=sys.stderr)
     for line in built.warnings:
         print(f"feeder design: warning: at the optimum, {line}", file=sys.stderr)
     if result.feasible and not built.robust:
@@ -224,6 +235,7 @@ def run(args: argparse.Namespace) -> int:
             args.map_points,
             built.record(),
             robust,
+            None if robust_built is None else robust_built.record(),
         )
         for path in written:
             print(f"wrote {path}")

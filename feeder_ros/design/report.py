@@ -7,8 +7,10 @@ sensitivity table, and the files ``feeder design --output DIR`` writes.
   ``robust_params.yaml`` the robust optimum (:mod:`~feeder_ros.design.robust_search`) alike
   (``platform_simulator --ros-args --params-file optimum_params.yaml``, or
   ``feeder sim --config optimum_params.yaml``);
-* ``design_convergence.png`` and ``design_speed_map.png`` (speed over the two variables it is most
-  sensitive to).
+* ``design_convergence.png``; ``design_speed_map.png``, the speed over the two variables it is
+  most sensitive to, the others at the optimum, the designs that hold their conditions when built
+  hatched; with a robust optimum, ``design_robust_map.png``, the same two variables with the others
+  at the robust optimum (a different slice of the space: each optimum on its own map).
 
 Every file is written atomically (:mod:`feeder_ros.atomic_files`).
 """
@@ -202,11 +204,14 @@ def write_report(
     map_points: int,
     robustness: dict[str, object] | None = None,
     robust: RobustResult | None = None,
+    robust_built: dict[str, object] | None = None,
 ) -> list[Path]:
     """Write the report files into ``out_dir`` (created if needed); returns their paths. The
     speed map simulates ``map_points`` x ``map_points`` designs around the optimum and, with a
     ``robust`` result, the carrier of each one's drawn plants (its hatched robust region: 14,400
-    carrier runs at the defaults, about 5 s)."""
+    carrier runs at the defaults, about 5 s); the robust optimum gets its own map (its slice of the
+    space). ``robustness`` and ``robust_built`` are the optimum's and the robust optimum's
+    :meth:`~feeder_ros.design.robustness.Robustness.record`."""
     out_dir.mkdir(parents=True, exist_ok=True)
     problem = result.problem
     paths: list[Path] = []
@@ -228,7 +233,7 @@ def write_report(
         "optimum": evaluation_record(problem, result.best),
         "reference": evaluation_record(problem, reference),
         "robustness": robustness,
-        "robust": None if robust is None else robust.record(problem),
+        "robust": None if robust is None else {**robust.record(problem), "as_built": robust_built},
         "history": [list(item) for item in result.history],
     }
     path = out_dir / "design.json"
@@ -255,15 +260,14 @@ def write_report(
     ranked = sorted(rows, key=lambda r: -abs(r.speed_elasticity) if _finite(r) else 0.0)
     if len(ranked) >= 2:
         tolerances = robust.tolerances if robust is not None else None
-        grid = speed_map(
-            problem,
-            result.params,
-            ranked[0].variable,
-            ranked[1].variable,
-            map_points,
-            tolerances,
-        )
-        paths.append(plot_speed_map(out_dir / "design_speed_map.png", grid, result))
+        axes = (ranked[0].variable, ranked[1].variable)
+        grid = speed_map(problem, result.params, *axes, map_points, tolerances)
+        path = out_dir / "design_speed_map.png"
+        paths.append(plot_speed_map(path, grid, result.params, "optimum"))
+        if robust is not None and robust.best is not None:
+            grid = speed_map(problem, robust.best.params, *axes, map_points, robust.tolerances)
+            path = out_dir / "design_robust_map.png"
+            paths.append(plot_speed_map(path, grid, robust.best.params, "robust optimum"))
     return paths
 
 
@@ -315,7 +319,8 @@ def plot_convergence(path: Path, result: DesignResult, reference: DesignEvaluati
     return save_figure(fig, path)
 
 
-def plot_speed_map(path: Path, grid: SpeedMap, result: DesignResult) -> Path:
+def plot_speed_map(path: Path, grid: SpeedMap, marked: FeederParameters, label: str) -> Path:
+    """The speed map ``grid`` (a slice through ``marked``, starred as ``label``)."""
     from matplotlib.backends.backend_agg import FigureCanvasAgg
     from matplotlib.colors import Normalize
     from matplotlib.figure import Figure
@@ -354,17 +359,12 @@ def plot_speed_map(path: Path, grid: SpeedMap, result: DesignResult) -> Path:
         extra.append(
             Patch(facecolor="none", edgecolor="black", hatch="///", label="robust when built")
         )
-    ax.plot(
-        getattr(result.params, grid.x_name),
-        getattr(result.params, grid.y_name),
-        "r*",
-        ms=14,
-        label="optimum",
-    )
+    ax.plot(getattr(marked, grid.x_name), getattr(marked, grid.y_name), "r*", ms=14, label=label)
     ax.set(
         xlabel=grid.x_name,
         ylabel=grid.y_name,
-        title="Part speed (faded: a condition of set S or validity not met)",
+        title=f"Part speed, other variables at the {label}\n"
+        "(faded: a condition of set S or validity not met)",
     )
     handles = [*ax.get_legend_handles_labels()[0], *extra]
     ax.legend(handles=handles, loc="best", fontsize="small")

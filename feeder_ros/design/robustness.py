@@ -11,8 +11,11 @@ and reports:
 * the probability that each condition of set S and the validity limits holds (the share of the
   drawn plants that meet it);
 * the part speed's quantiles over the drawn plants;
-* the largest fraction of the tolerances (the same draws, scaled towards the nominal design) within
-  which every drawn plant still meets every condition (bisection, to 1/64);
+* the largest multiple of the tolerances (the same draws, scaled about the nominal design) within
+  which every drawn plant still meets every condition: below 1 for a design that misses a
+  condition somewhere within them (bisection, to 1/64), above 1 for one that holds beyond them
+  (bisection up to :func:`largest_scale_tried`: 4 times, less when a relative tolerance scaled
+  would reach the whole value);
 * a warning for each condition the nominal design meets but a plant within the tolerances does not:
   a design that works only at its nominal values does not work.
 
@@ -34,12 +37,28 @@ from feeder_ros.design.space import Tolerances
 from feeder_ros.design.stick_slip_conditions import CONDITION_NAMES, condition_values
 from feeder_ros.physics.parameters import FeederParameters
 
-__all__ = ["Robustness", "assess", "drawn_plants", "robustness_text"]
+__all__ = [
+    "MAX_SCALE",
+    "Robustness",
+    "assess",
+    "drawn_plants",
+    "largest_scale_tried",
+    "robustness_text",
+]
 
 F64 = npt.NDArray[np.float64]
 
-#: bisection steps of the largest tolerance fraction (resolution 2**-6)
+#: bisection steps of the largest tolerance multiple (resolution 2**-6 of the interval)
 SCALE_STEPS = 6
+#: the largest multiple of the tolerances tried for a design that holds within them all
+MAX_SCALE = 4.0
+
+
+def largest_scale_tried(tolerances: Tolerances) -> float:
+    """:data:`MAX_SCALE`, or less where a relative tolerance that many times over would move a
+    value by 90 % of itself or more (a friction known to +-30 %: 3 times)."""
+    widest = max(tolerances.relative.values(), default=0.0)
+    return MAX_SCALE if widest <= 0.0 else min(MAX_SCALE, 0.9 / widest)
 
 
 def _offsets(tolerances: Tolerances) -> F64:
@@ -82,7 +101,8 @@ class Robustness:
     probability: F64  #: per condition: the share of drawn plants meeting it
     all_met: float  #: the share of drawn plants meeting every condition
     speed_quantiles_mps: dict[str, float]  #: "p5", "p50", "p95" over the drawn plants
-    largest_scale: float  #: fraction of the tolerances within which every draw meets all
+    largest_scale: float  #: multiple of the tolerances within which every draw meets all
+    largest_scale_tried: float  #: the most :func:`assess` tried (largest_scale at it: at least)
     samples: int
     promised: float  #: tolerances.probability
     warnings: list[str]
@@ -105,7 +125,8 @@ class Robustness:
                 zip(CONDITION_NAMES, self.nominal_conditions.tolist(), strict=True)
             ),
             "speed_quantiles_mps": self.speed_quantiles_mps,
-            "largest_tolerance_fraction": self.largest_scale,
+            "largest_tolerance_multiple": self.largest_scale,
+            "largest_tolerance_multiple_tried": self.largest_scale_tried,
             "robust": self.robust,
             "warnings": list(self.warnings),
         }
@@ -146,6 +167,7 @@ def assess(problem: DesignProblem, params: FeederParameters, tolerances: Toleran
         all_met=float(every.mean()),
         speed_quantiles_mps=quantiles,
         largest_scale=largest,
+        largest_scale_tried=largest_scale_tried(tolerances),
         samples=tolerances.samples,
         promised=tolerances.probability,
         warnings=warnings,
@@ -159,12 +181,16 @@ def _largest_scale(
     all_met_at_full: bool,
     nominal_met: bool,
 ) -> float:
-    """Bisection on the tolerance fraction: every draw meets every condition below it."""
-    if all_met_at_full:
-        return 1.0
+    """Bisection on the tolerance multiple: every draw meets every condition below it (in [0, 1]
+    when a draw misses within the tolerances, else in [1, :func:`largest_scale_tried`])."""
     if not nominal_met:
         return 0.0
-    low, high = 0.0, 1.0
+    low, high = (1.0, largest_scale_tried(tolerances)) if all_met_at_full else (0.0, 1.0)
+    if high <= low:
+        return low
+    values, _ = _conditions(problem, drawn_plants(params, tolerances, high))
+    if bool(np.all(values >= 0.0)):
+        return high
     for _ in range(SCALE_STEPS):
         middle = 0.5 * (low + high)
         values, _ = _conditions(problem, drawn_plants(params, tolerances, middle))
@@ -180,7 +206,13 @@ def robustness_text(found: Robustness, tolerances: Tolerances, label: str = "the
     widths = [f"{name} +-{100 * w:g} %" for name, w in tolerances.relative.items()]
     widths += [f"{name} +-{w:g}" for name, w in tolerances.absolute.items()]
     q = found.speed_quantiles_mps
-    if found.largest_scale > 0.0:
+    if found.largest_scale >= found.largest_scale_tried > 1.0:
+        within = f"within {found.largest_scale:.3g} times these tolerances (the most tried)"
+    elif found.largest_scale > 1.0:
+        within = f"within {found.largest_scale:.3g} times these tolerances"
+    elif found.largest_scale == 1.0:
+        within = "within these tolerances, and no wider"
+    elif found.largest_scale > 0.0:
         within = f"within {100 * found.largest_scale:.3g} % of these tolerances"
     elif found.nominal_conditions.min() >= 0.0:
         within = f"within less than {100 / 2**SCALE_STEPS:.2g} % of these tolerances"

@@ -15,9 +15,11 @@ from feeder_ros.design.optimizer import DesignProblem, DesignResult, evaluate_de
 from feeder_ros.design.robust_search import (
     amplitude_intervals,
     chance_lower_bound,
+    robust_mask,
     robust_search,
 )
 from feeder_ros.design.robustness import drawn_plants
+from feeder_ros.design.sensitivity import speed_map
 from feeder_ros.design.space import DesignError, Tolerances, load_design_config
 from feeder_ros.design.stick_slip_conditions import condition_values
 from feeder_ros.physics.parameters import FeederParameters
@@ -88,6 +90,8 @@ def test_the_robust_optimum_holds_on_fresh_plants_and_the_nominal_does_not(
     nominal_share = _met(problem, drawn_plants(result.params, fresh)).mean()
     assert robust_share >= tolerances.probability, robust_share
     assert nominal_share < 0.8, nominal_share
+    # the speed map's hatching says the same of both
+    assert robust_mask(problem, [best.params, result.params], tolerances).tolist() == [True, False]
     speeds = [
         e.speed_mps for e in evaluate_designs(drawn_plants(best.params, fresh), problem.window)
     ]
@@ -139,3 +143,24 @@ def test_the_robust_search_refuses_what_it_does_not_cover(
     min_force = dataclasses.replace(problem, objective="min-force", target_speed_mps=0.01)
     with pytest.raises(DesignError, match="robust search optimises max-speed"):
         robust_search(min_force, result.ranked, tolerances)
+
+
+def test_the_speed_maps_robust_region_is_the_chance_constraint_judged_by_exact_runs(
+    searched: tuple[DesignProblem, Tolerances, DesignResult],
+) -> None:
+    """The hatched cells (homogeneity's prediction, one carrier run per draw) are those whose
+    drawn plants, each simulated at the cell's own amplitude, meet the chance constraint."""
+    problem, tolerances, result = searched
+    small = dataclasses.replace(tolerances, samples=16, probability=0.8)
+    center = result.params.with_changes(drive_amplitude_n=0.6 * result.params.drive_amplitude_n)
+    grid = speed_map(problem, center, "plate_thickness_m", "plate_angle_deg", 4, small)
+    assert grid.robust is not None
+    exact = np.zeros_like(grid.robust)
+    for i, angle in enumerate(grid.y):
+        for j, thickness in enumerate(grid.x):
+            cell = center.with_changes(plate_thickness_m=thickness, plate_angle_deg=angle)
+            met = int(_met(problem, drawn_plants(cell, small)).sum())
+            exact[i, j] = chance_lower_bound(met, small.samples) >= small.probability
+    assert exact.any()  # both kinds of cell on this slice
+    assert not exact.all()
+    assert np.array_equal(grid.robust, exact), (grid.robust, exact)

@@ -13,7 +13,12 @@ import pytest
 
 from feeder_ros.cli.sim import load_parameters
 from feeder_ros.design.optimizer import DesignProblem, evaluate_designs, optimize
-from feeder_ros.design.robustness import assess, drawn_plants, robustness_text
+from feeder_ros.design.robustness import (
+    assess,
+    drawn_plants,
+    largest_scale_tried,
+    robustness_text,
+)
 from feeder_ros.design.space import DesignConfig, DesignError, Tolerances, load_design_config
 from feeder_ros.design.stick_slip_conditions import CONDITION_NAMES, condition_values
 from feeder_ros.physics.parameters import FeederParameters
@@ -111,7 +116,23 @@ def test_the_nominal_optimum_is_not_robust_and_a_derated_design_is(
     safe = assess(problem, derated, tolerances)
     assert safe.robust
     assert safe.all_met == 1.0
-    assert safe.largest_scale == 1.0
+    # it holds beyond the tolerances: every draw scaled to the multiple found meets every
+    # condition, one step (of the bisection's 6) wider does not
+    tried = largest_scale_tried(tolerances)
+    assert tried == pytest.approx(3.0)  # friction at +-30 %: 90 % of the value at most
+    assert 1.0 < safe.largest_scale < tried
+    values = [
+        condition_values(e.margins, problem.limits)
+        for scale in (safe.largest_scale, safe.largest_scale + (tried - 1.0) / 64)
+        for e in evaluate_designs(drawn_plants(derated, tolerances, scale), problem.window)
+    ]
+    within, wider = np.array(values[: tolerances.samples]), np.array(values[tolerances.samples :])
+    assert bool(np.all(within >= 0.0))
+    assert not bool(np.all(wider >= 0.0))
+    assert f"within {safe.largest_scale:.3g} times these tolerances" in robustness_text(
+        safe, tolerances
+    )
+    assert safe.record()["largest_tolerance_multiple"] == safe.largest_scale
     assert safe.warnings == []
     assert safe.speed_quantiles_mps["p50"] < q["p50"]  # the price of the margin
 
