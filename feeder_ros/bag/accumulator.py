@@ -29,7 +29,16 @@ from feeder_ros.bag.feeders import (
 from feeder_ros.bag.reader import LOG_TIME, ColumnBatch
 from feeder_ros.bag.results import Segment
 
-__all__ = ["MAX_SAMPLE_PERIOD_S", "METRICS", "PENDING_LIMIT", "Accumulator", "Timeline", "segments"]
+__all__ = [
+    "MAX_SAMPLE_PERIOD_S",
+    "METRICS",
+    "MIN_PHASE_BINS",
+    "PENDING_LIMIT",
+    "PHASE_BINS",
+    "Accumulator",
+    "Timeline",
+    "segments",
+]
 
 #: the longest CarrierStateBatch sample period taken (the vehicle estimator node's limit) [s]
 MAX_SAMPLE_PERIOD_S = 1.0
@@ -40,6 +49,11 @@ METRICS = ("est_speed", "est_slip", "gt_dx", "gt_dt", "gt_slip", "sensor_speed",
 #: metric samples held before a forced flush
 PENDING_LIMIT = 2_000_000
 _COMMAND_MARGIN_NS = 2_000_000_000  # command-only bags: commands may be stamped this much late
+#: the drive cycle's phase bins the part-state samples of a segment are sorted into, and how many
+#: of them the samples must visit for the sampled slip fraction to be given (a slip or stick arc
+#: is then resolved to a bin, 1/36 of the cycle, instead of to the sampled phases' spacing)
+PHASE_BINS = 36
+MIN_PHASE_BINS = 24
 
 Setting = tuple[float, float]  # (frequency_hz, amplitude_n); (0, 0) is "off"
 #: pending samples: times, values, and when each one's span began (None: at the sample)
@@ -117,6 +131,10 @@ class Accumulator:
         self.last_place: dict[int, tuple[int, float]] = {}  # part on the track -> (t, position)
         #: values left out, by reason: (count, an example) for the problems list
         self.left_out: dict[str, tuple[int, str]] = {}
+        #: per segment (driven): which of the drive cycle's PHASE_BINS the part states sampled
+        self.phases_seen: dict[int, npt.NDArray[np.bool_]] = {}
+        #: (start s, end s, why) of each segment whose sampled slip fraction is not given
+        self.aliased: list[tuple[float, float, str]] = []
 
     def leave_out(self, reason: str, count: int, example: str) -> None:
         if count:
@@ -210,6 +228,8 @@ class Accumulator:
         """Add samples to the sums of their segments (by ``times``, the drive change points); a
         sample whose span began in an earlier segment to ``straddling`` instead."""
         seg = np.searchsorted(times, t, side="right")  # segment 0: before the first drive info
+        if metric == "gt_slip":
+            self._see_phases(times, seg, t)
         whole = (
             np.ones(len(t), dtype=bool)
             if since is None
@@ -229,6 +249,39 @@ class Accumulator:
                 old = np.concatenate([old, np.zeros(n - len(old))])
             old[: len(add)] += add
             target[metric] = old
+
+    def _see_phases(
+        self, times: npt.NDArray[np.int64], seg: npt.NDArray[np.int64], t: npt.NDArray[np.int64]
+    ) -> None:
+        """Mark the drive-cycle phases (from the segment's start) at which parts were sampled."""
+        settings = self.timeline.settings
+        for i in np.unique(seg[seg > 0]).tolist():
+            frequency, amplitude = settings[i - 1]
+            if frequency <= 0.0 or amplitude == 0.0:
+                continue  # the drive is off: no cycle to sample
+            since = (t[seg == i] - times[i - 1]).astype(np.float64) * 1e-9
+            bins = np.floor(np.mod(since * frequency, 1.0) * PHASE_BINS).astype(np.int64)
+            seen = self.phases_seen.setdefault(i, np.zeros(PHASE_BINS, dtype=bool))
+            seen[np.clip(bins, 0, PHASE_BINS - 1)] = True
+
+    def sampled_slip(self, i: int) -> tuple[float, str | None]:
+        """Segment ``i``'s ground-truth slip fraction (the share of part samples slipping), or
+        NaN and why when the samples saw too few phases of the drive cycle to give it: at a
+        rate commensurate with the drive (50 Hz states of a 30 Hz drive: 5 phases) the share is
+        that of a few fixed phases, wrong by up to a fifth of the cycle."""
+        value = _mean(self, "gt_slip", i)
+        seen = self.phases_seen.get(i)
+        if seen is None or math.isnan(value):
+            return value, None
+        count = int(seen.sum())
+        if count >= MIN_PHASE_BINS:
+            return value, None
+        frequency = self.timeline.settings[i - 1][0]
+        return math.nan, (
+            f"the part states sampled {count} of {PHASE_BINS} phase bins of the {frequency:g} Hz "
+            "drive cycle (a sample rate commensurate with the drive): their share slipping, "
+            f"{value:.2f}, would be that of those phases only"
+        )
 
     # -- per type -------------------------------------------------------------------------------
 
@@ -416,6 +469,9 @@ def segments(acc: Accumulator, start: int, end: int, min_segment_s: float) -> li
             continue  # nothing before the first drive information
         duration = (hi - lo) * 1e-9
         exited = _count(acc, "exits", i)
+        slip_truth, why = acc.sampled_slip(i)
+        if why is not None and duration >= min_segment_s:
+            acc.aliased.append(((lo - start) * 1e-9, (hi - start) * 1e-9, why))
         segment = Segment(
             index=len(out),
             start_s=(lo - start) * 1e-9,
@@ -425,7 +481,7 @@ def segments(acc: Accumulator, start: int, end: int, min_segment_s: float) -> li
             speed_estimate_mps=_mean(acc, "est_speed", i),
             slip_estimate=_mean(acc, "est_slip", i),
             speed_ground_truth_mps=_ratio(acc, "gt_dx", "gt_dt", i),
-            slip_ground_truth=_mean(acc, "gt_slip", i),
+            slip_ground_truth=slip_truth,
             speed_sensors_mps=_mean(acc, "sensor_speed", i),
             transits=_count(acc, "sensor_speed", i),
             transits_left_out=_straddling(acc, "sensor_speed", i),

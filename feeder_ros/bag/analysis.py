@@ -275,6 +275,13 @@ def _feeder_result(
         "carrier state" if acc.state.times else "drive command" if acc.command.times else "none"
     )
     found = segments(acc, acc.t_min, acc.t_max, min_segment_s)
+    if acc.aliased:
+        lo, hi, why = acc.aliased[0]
+        result.problems.append(
+            f"[aliased] no ground-truth slip fraction in {len(acc.aliased)} segment(s) "
+            f"(the first at {lo:.6g}-{hi:.6g} s: {why}); the truth's speed is unaffected; "
+            "record part states faster, or at a rate no simple multiple of the drive's"
+        )
     spans = [(s.start_s, s.end_s) for s in found]
     for s, target in zip(found, targets(run.log, spans, acc.t_min), strict=True):
         s.target_speed_mps = target

@@ -192,7 +192,10 @@ def check_standard(result: Any, drive_source: str = "carrier state", end_s: floa
         assert seg.slip_estimate == pytest.approx(EST_SLIP[i], rel=1e-12)
         speeds, phases = TRUTH[i]
         assert seg.speed_ground_truth_mps == pytest.approx(np.mean(speeds), rel=1e-12)
-        assert seg.slip_ground_truth == pytest.approx(np.mean([p != 0 for p in phases]))
+        if amp:  # 100 Hz part states of a 30 or 40 Hz drive: 10 or 5 phases, no share given
+            assert math.isnan(seg.slip_ground_truth)
+        else:
+            assert seg.slip_ground_truth == pytest.approx(np.mean([p != 0 for p in phases]))
         assert seg.parts_exited == EXITS[i]
         assert seg.feed_rate_per_min == pytest.approx(EXITS[i] / (seg.duration_s / 60.0))
     assert result.segments[0].speed_sensors_mps == pytest.approx(0.5, rel=1e-9)
@@ -221,7 +224,9 @@ def test_segments_speeds_slip_feed_rate_and_diagnostics(tmp_path: Path) -> None:
     assert result.messages["feeder_ros/msg/CarrierState"] == 5000
     assert result.topics["feeder_ros/msg/VehicleEstimate"] == ["/cell_a/estimate"]
     assert "sensor_msgs/msg/Imu" not in result.messages  # unrelated topics are not decoded
-    assert result.problems == []
+    [problem] = result.problems
+    assert problem.startswith("[aliased] no ground-truth slip fraction in 2 segment(s) (the first ")
+    assert "sampled 10 of 36 phase bins of the 30 Hz drive cycle" in problem
     assert not result.cut_short
 
 
@@ -700,3 +705,36 @@ def test_the_truth_is_the_parts_displacement_not_their_sampled_velocity(tmp_path
             w.write("/f/parts/state", cdr(stamp(PartStateArray(parts=[part]), t_ns)), t_ns)
     [segment] = analyze_bag(tmp_path / "bag").segments
     assert segment.speed_ground_truth_mps == pytest.approx(mean, rel=1e-9)
+
+
+@pytest.mark.parametrize(("rate_hz", "given"), [(50.0, False), (997.0, True)])
+def test_the_sampled_slip_fraction_is_given_only_when_the_samples_cover_the_cycle(
+    tmp_path: Path, rate_hz: float, given: bool
+) -> None:
+    """A part slipping over [0.1, 0.35) of each 30 Hz drive cycle (slip fraction 0.25): sampled at
+    50 Hz it is seen at 5 phases only, one of them slipping (0.20, wrong); sampled at 997 Hz the
+    phases cover the cycle and the share slipping is the slip fraction."""
+    with BagWriter(tmp_path / "bag") as w:
+        w.add_topic("/f/drive/command", "feeder_ros/msg/DriveCommand")
+        w.add_topic("/f/parts/state", "feeder_ros/msg/PartStateArray")
+        command = DriveCommand(enabled=True, frequency_hz=30.0, amplitude_n=20.0)
+        w.write("/f/drive/command", cdr(stamp(command, T0)), T0)
+        for k in range(int(4 * rate_hz) + 1):  # 4 s
+            t_ns = T0 + round(k * 1e9 / rate_hz)
+            phase = math.fmod((t_ns - T0) * 1e-9 * 30.0, 1.0)
+            slipping = 0.1 <= phase < 0.35
+            part = PartState(part_id=1, position_m=0.008 * (t_ns - T0) * 1e-9, on_track=True)
+            part.phase = PartState.PHASE_SLIP_FORWARD if slipping else PartState.PHASE_STICK
+            w.write("/f/parts/state", cdr(stamp(PartStateArray(parts=[part]), t_ns)), t_ns)
+    result = analyze_bag(tmp_path / "bag")
+    [segment] = result.segments
+    aliased = [p for p in result.problems if p.startswith("[aliased]")]
+    if given:
+        assert segment.slip_ground_truth == pytest.approx(0.25, abs=0.005)
+        assert aliased == []
+    else:
+        assert math.isnan(segment.slip_ground_truth)
+        [problem] = aliased
+        assert "sampled 5 of 36 phase bins of the 30 Hz drive cycle" in problem
+        assert "their share slipping, 0.20, would be that of those phases only" in problem
+    assert segment.speed_ground_truth_mps == pytest.approx(0.008, rel=1e-9)  # speed: always
