@@ -316,11 +316,25 @@ def test_speed_is_judged_against_the_estimate_s_interval() -> None:
     # the same speed, uncalibrated (+- 8 mm/s): not confirmed, and no alarm either
     status = judged(3.0, 0.0204, 0.004)
     assert (status.level, status.alarms) == (1, 0)
-    assert status.message.startswith("the estimate cannot confirm the target: 20.40 +- 8.00 mm/s")
+    assert status.message == (
+        "the estimate cannot confirm the target: 20.40 +- 8.00 mm/s against 20.00 mm/s +- 15 %: "
+        "its interval is wider than the tolerance (part model not calibrated yet?)"
+    )
     # 15 mm/s, 25 % slow, but +- 4 mm/s reaches into the tolerance: no underspeed alarm
     assert judged(5.0, 0.015, 0.002).alarms == 0
-    # 15 +- 0.4 mm/s lies wholly below 17 mm/s: underspeed after the delay
-    assert judged(7.0, 0.015, 0.0002).alarms == Alarm.UNDERSPEED
+    # 15 +- 2.4 mm/s: narrower than the tolerance, straddling its edge
+    status = judged(6.5, 0.015, 0.0012)
+    assert status.alarms == 0
+    assert status.message.endswith(": its interval reaches beyond the tolerance")
+    # 15 +- 0.4 mm/s lies wholly below 17 mm/s: said at once, underspeed after the delay
+    monitor.on_estimate(8.0, 0.015, 0.9, 0.0002)
+    status = monitor.evaluate(8.0)
+    assert (status.level, status.alarms) == (1, 0)
+    assert status.message.endswith(
+        "15.00 +- 0.40 mm/s against 20.00 mm/s +- 15 %: the part speed is off target "
+        "(starting, ramping, or an alarm after its delay)"
+    )
+    assert judged(8.5, 0.015, 0.0002).alarms == Alarm.UNDERSPEED
     # an estimate without a finite uncertainty gives no speed
-    monitor.on_estimate(9.0, 0.02, 1.0, math.nan)
-    assert math.isnan(monitor.evaluate(9.0 + 2.5).estimated_speed_mps)
+    monitor.on_estimate(11.0, 0.02, 1.0, math.nan)
+    assert math.isnan(monitor.evaluate(11.0 + 2.5).estimated_speed_mps)
