@@ -371,7 +371,8 @@ class SpeedMonitor:
         cfg = self.config
         target = self._target
         half = cfg.interval_sigma * self._sigma
-        shown = f"{1e3 * speed:.2f} +- {1e3 * half:.2f} mm/s"
+        shown_speed = 1e3 * speed if abs(speed) >= 5e-6 else 0.0  # no "-0.00" at rest
+        shown = f"{shown_speed:.2f} +- {1e3 * half:.2f} mm/s"
         band = cfg.speed_tolerance * abs(target)
         if abs(speed - target) + half <= band:
             return OK, f"at target ({shown})"

@@ -335,6 +335,11 @@ def test_speed_is_judged_against_the_estimate_s_interval() -> None:
         "(starting, ramping, or an alarm after its delay)"
     )
     assert judged(8.5, 0.015, 0.0002).alarms == Alarm.UNDERSPEED
+    # a part at rest reads 0.00, not "-0.00" (an estimate a hair below zero)
+    resting = SpeedMonitor(MonitorConfig(speed_tolerance=0.15, alarm_delay_s=1.0))
+    resting.on_drive(0.0, True, TARGET)
+    resting.on_estimate(0.5, -1e-7, 0.9, 1e-7)
+    assert "cannot confirm the target: 0.00 +- 0.00 mm/s against" in resting.evaluate(0.5).message
     # an estimate without a finite uncertainty gives no speed
     monitor.on_estimate(11.0, 0.02, 1.0, math.nan)
     assert math.isnan(monitor.evaluate(11.0 + 2.5).estimated_speed_mps)
