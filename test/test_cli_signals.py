@@ -174,3 +174,63 @@ def test_ctrl_c_ends_a_cell_and_its_live_view_with_exit_status_0(tmp_path: Path)
         assert wait_until(lambda: not any(_alive(pid) for pid in children), 30.0)
     finally:
         _stop(cell)
+
+
+def _interrupt_repeatedly(process: DrainedProcess, times: int = 3, gap_s: float = 0.02) -> int:
+    """Ctrl-C, then SIGINT again every ``gap_s`` while it stops (as ``feeder cell`` sends one to
+    its children right after the terminal's): the first stops it, the others land in its
+    teardown. (A SIGINT once the process has printed its summary and exits ends it by the
+    signal: Python restores the default action as it finalises.)"""
+    for _ in range(times):
+        if process.poll() is not None:
+            break
+        os.killpg(process.pid, signal.SIGINT)
+        time.sleep(gap_s)
+    try:
+        return process.wait(timeout=60.0)
+    except subprocess.TimeoutExpired:
+        raise AssertionError(f"did not stop:\n{process.output()[-3000:]}") from None
+
+
+def test_further_ctrl_c_while_a_view_or_a_recording_stops_do_not_cut_it_short(
+    tmp_path: Path,
+) -> None:
+    """The summary is printed and the exit status is 0 however many SIGINTs follow the first
+    (a view started by a cell got two and printed "feeder: interrupted" instead, exit 130)."""
+    view = _start("view", "--namespace", NS, "--port", "0")
+    recorder = _start("record", "--namespace", NS, "-o", str(tmp_path / "bag"))
+    try:
+        assert wait_until(lambda: "serving the live view" in view.output(), 60.0), view.output()
+        assert wait_until(lambda: "recording into" in recorder.output(), 60.0), recorder.output()
+        for process in (view, recorder):
+            status = _interrupt_repeatedly(process)
+            output = process.output()
+            assert (status, "feeder: interrupted" in output) == (0, False), output[-3000:]
+            assert "stopped by signal" in output
+            assert "Traceback" not in output
+        assert not bag_info(Bag(tmp_path / "bag"), verify=True).cut_short  # closed, readable
+    finally:
+        _stop(view)
+        _stop(recorder)
+
+
+def test_only_the_first_interrupt_raises_within_the_block() -> None:
+    from feeder_ros.cli.interrupts import first_interrupt_stops
+
+    before = signal.getsignal(signal.SIGINT)
+    with first_interrupt_stops():
+        pass
+    assert signal.getsignal(signal.SIGINT) is before  # not interrupted: as it was
+    raised = 0
+    try:
+        with first_interrupt_stops():
+            for _ in range(3):
+                try:
+                    os.kill(os.getpid(), signal.SIGINT)
+                    time.sleep(0.05)  # the handler runs between bytecodes of the main thread
+                except KeyboardInterrupt:
+                    raised += 1
+        assert raised == 1
+        assert signal.getsignal(signal.SIGINT) is signal.SIG_IGN  # ending: ignored to the exit
+    finally:
+        signal.signal(signal.SIGINT, before)

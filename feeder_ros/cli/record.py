@@ -14,6 +14,7 @@ import time
 from pathlib import Path
 
 from feeder_ros.cli.arguments import add_topic_selection
+from feeder_ros.cli.interrupts import first_interrupt_stops
 from feeder_ros.cli.main import CommandError
 from feeder_ros.cli.outputs import check_output_dir, output_path
 
@@ -122,9 +123,12 @@ def run(args: argparse.Namespace) -> int:
         duration_s=args.duration,
         use_sim_time=args.use_sim_time,
     )
-    try:
-        summary = record(options, on_ready=lambda: print(f"recording into {output}", flush=True))
-    except BagError as error:
-        raise CommandError(str(error)) from None
-    print(summary.text(), flush=True)
+    with first_interrupt_stops():  # the cell's SIGINT after the terminal's: one stop
+        try:
+            summary = record(
+                options, on_ready=lambda: print(f"recording into {output}", flush=True)
+            )
+        except BagError as error:
+            raise CommandError(str(error)) from None
+        print(summary.text(), flush=True)
     return 0

@@ -10,6 +10,7 @@ from __future__ import annotations
 import argparse
 
 from feeder_ros.cli.arguments import add_topic_selection
+from feeder_ros.cli.interrupts import first_interrupt_stops
 from feeder_ros.cli.main import CommandError
 from feeder_ros.live_view import DEFAULT_PORT, LOCALHOST
 
@@ -72,9 +73,10 @@ def run(args: argparse.Namespace) -> int:
     def ready(sink: FoxgloveSink) -> None:
         print(f"serving the live view on {sink.url}", flush=True)
 
-    try:
-        summary = serve(selection, args.host, args.port, on_ready=ready)
-    except LiveViewError as error:
-        raise CommandError(str(error)) from None
-    print(summary.text(), flush=True)
+    with first_interrupt_stops():  # the cell's SIGINT after the terminal's: one stop
+        try:
+            summary = serve(selection, args.host, args.port, on_ready=ready)
+        except LiveViewError as error:
+            raise CommandError(str(error)) from None
+        print(summary.text(), flush=True)
     return 0
