@@ -28,6 +28,9 @@ def test_a_lagging_simulator_applies_commands_now_and_raises_error() -> None:
         "-p", "imu_rate_hz:=20000.0", "-p", "state_rate_hz:=5000.0", "-p", "initial_parts:=10000",
         "-p", "part_spacing_m:=0.0", "-p", "parts_rate_hz:=1000.0",
         "-p", "max_lag_s:=0.5", "-p", "command_timeout_s:=5.0",
+        # 10 ms steps: this load runs at about 0.01x real time, so a 50 ms step took 5 s and a
+        # command waited for the step under way, then its diagnostics for the next: 20 s and more
+        "-p", "max_step_s:=0.01",
     ]  # fmt: skip
     with running(command) as process, probe_node() as node:
         statuses: list[DiagnosticStatus] = []
