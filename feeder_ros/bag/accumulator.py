@@ -253,16 +253,20 @@ class Accumulator:
     def _see_phases(
         self, times: npt.NDArray[np.int64], seg: npt.NDArray[np.int64], t: npt.NDArray[np.int64]
     ) -> None:
-        """Mark the drive-cycle phases (from the segment's start) at which parts were sampled."""
-        settings = self.timeline.settings
-        for i in np.unique(seg[seg > 0]).tolist():
-            frequency, amplitude = settings[i - 1]
-            if frequency <= 0.0 or amplitude == 0.0:
-                continue  # the drive is off: no cycle to sample
-            since = (t[seg == i] - times[i - 1]).astype(np.float64) * 1e-9
-            bins = np.floor(np.mod(since * frequency, 1.0) * PHASE_BINS).astype(np.int64)
-            seen = self.phases_seen.setdefault(i, np.zeros(PHASE_BINS, dtype=bool))
-            seen[np.clip(bins, 0, PHASE_BINS - 1)] = True
+        """Mark the drive-cycle phases (from the segment's start) at which parts were sampled
+        (one pass over the samples, however many segments they fall in)."""
+        settings = np.asarray(self.timeline.settings, dtype=np.float64).reshape(-1, 2)
+        driven = seg > 0
+        seg, t = seg[driven], t[driven]
+        frequency, amplitude = settings[seg - 1, 0], settings[seg - 1, 1]
+        on = (frequency > 0.0) & (amplitude != 0.0)  # the drive off: no cycle to sample
+        seg, t, frequency = seg[on], t[on], frequency[on]
+        since = (t - times[seg - 1]).astype(np.float64) * 1e-9
+        bins = np.floor(np.mod(since * frequency, 1.0) * PHASE_BINS).astype(np.int64)
+        visited = np.unique(seg * PHASE_BINS + np.clip(bins, 0, PHASE_BINS - 1))
+        for code in visited.tolist():
+            i, k = divmod(code, PHASE_BINS)
+            self.phases_seen.setdefault(i, np.zeros(PHASE_BINS, dtype=bool))[k] = True
 
     def sampled_slip(self, i: int) -> tuple[float, str | None]:
         """Segment ``i``'s ground-truth slip fraction (the share of part samples slipping), or
@@ -462,6 +466,7 @@ def segments(acc: Accumulator, start: int, end: int, min_segment_s: float) -> li
     bounds = [start, *timeline.times, end]
     settings: list[Setting | None] = [None, *timeline.settings]
     out: list[Segment] = []
+    acc.aliased = []  # this call's segments: found afresh each time
     for i, setting in enumerate(settings):
         lo, hi = bounds[i], bounds[i + 1]
         has_data = any(_count(acc, m, i) for m in METRICS)
