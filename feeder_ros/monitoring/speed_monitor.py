@@ -353,8 +353,7 @@ class SpeedMonitor:
             self._speed_alarm = 0
             return 0
         error = (speed - target) / abs(target)
-        margin = cfg.interval_sigma * self._sigma / abs(target)
-        if abs(error) - margin > cfg.speed_tolerance:
+        if self._beyond_tolerance(speed):
             if math.isnan(self._speed_error_since):
                 self._speed_error_since = t
             if t - self._speed_error_since >= cfg.alarm_delay_s:
@@ -364,6 +363,13 @@ class SpeedMonitor:
             if abs(error) < cfg.speed_tolerance * cfg.clear_ratio:
                 self._speed_alarm = 0
         return self._speed_alarm
+
+    def _beyond_tolerance(self, speed: float) -> bool:
+        """The whole interval ``speed +- interval_sigma * uncertainty`` lies outside the target's
+        tolerance (under- or overspeed once it lasts ``alarm_delay_s``)."""
+        cfg, target = self.config, self._target
+        half = cfg.interval_sigma * self._sigma
+        return abs(speed - target) - half > cfg.speed_tolerance * abs(target)
 
     def _target_message(self, speed: float) -> tuple[int, str]:
         """At target only when the whole interval lies within the tolerance; an interval that
@@ -379,7 +385,7 @@ class SpeedMonitor:
         against = f"{1e3 * target:.2f} mm/s +- {100 * cfg.speed_tolerance:g} %"
         if half > band:  # no estimate this wide could confirm any speed: calibration, noise
             why = "its interval is wider than the tolerance (part model not calibrated yet?)"
-        elif abs(speed - target) - half > band:  # wholly outside: an alarm once it lasts
+        elif self._beyond_tolerance(speed):  # wholly outside: an alarm once it lasts
             why = "the part speed is off target (starting, ramping, or an alarm after its delay)"
         else:
             why = "its interval reaches beyond the tolerance"
