@@ -201,7 +201,8 @@ def running(
     command: Sequence[str], env: dict[str, str] | None = None, **kwargs: Any
 ) -> Iterator[DrainedProcess]:
     """Start a process; on exit interrupt it (Ctrl-C) and insist it ended cleanly. If the test
-    failed, the end of the process's output is printed (pytest shows it with the failure)."""
+    failed or the process ended with a status other than 0, the end of its output is printed
+    (pytest shows it with the failure: tests assert the status after the block)."""
     process = DrainedProcess(command, env=env, **kwargs)
     failed = True
     try:
@@ -217,7 +218,7 @@ def running(
                 process.kill()
                 process.wait()
                 stuck = True
-        if failed or stuck:
+        if failed or stuck or process.returncode != 0:
             tail = process.output()[-4000:]
             print(f"--- output of {Path(command[0]).name} (exit {process.returncode}):\n{tail}")
         if stuck:

@@ -23,7 +23,7 @@ import tempfile
 import time
 from collections.abc import Sequence
 from pathlib import Path
-from typing import Any
+from typing import TYPE_CHECKING, Any
 
 from feeder_ros.atomic_files import atomic_text
 from feeder_ros.cell import CellDescription, CellError, load_cell, parameters_document
@@ -31,6 +31,9 @@ from feeder_ros.cli.arguments import positive_float
 from feeder_ros.cli.main import CommandError
 from feeder_ros.cli.outputs import check_output_file, output_path
 from feeder_ros.cli.view import DEFAULT_PORT, port_number
+
+if TYPE_CHECKING:
+    from rclpy.context import Context
 
 HELP = "start a feeder cell (all its nodes) from a cell description; Ctrl-C stops it"
 EPILOG = """\
@@ -199,10 +202,7 @@ def run_composed(
         # cell as it does once the nodes run (nothing started yet to stop), exit status 0
         import importlib
 
-        from rclpy.executors import ExternalShutdownException
-
         from feeder_ros.nodes.catalog import NODE_MODULES
-        from feeder_ros.nodes.runner import StopOnShutdown
         from feeder_ros.ros_compat import RosSession
 
         modules = {name.rsplit(".", 1)[-1]: name for name in NODE_MODULES}
@@ -212,12 +212,9 @@ def run_composed(
         }
         for name, command in extras:
             _start(name, command, children)
-        try:
-            with RosSession() as init, StopOnShutdown(init.context):
-                if _spin_composed(cell, classes, parameters_file, duration, children):
-                    status = 1
-        except ExternalShutdownException:
-            pass
+        with RosSession() as init:
+            if _spin_composed(cell, classes, init.context, parameters_file, duration, children):
+                status = 1
     except KeyboardInterrupt:
         # also: rclpy's handler shuts the context down, then chains to Python's
         # (KeyboardInterrupt), which can land anywhere in the shutdown: the cell is stopping
@@ -233,11 +230,14 @@ def run_composed(
 def _spin_composed(
     cell: CellDescription,
     classes: dict[str, Any],
+    context: Context,
     parameters_file: Path,
     duration: float | None,
     children: Children,
 ) -> bool:
-    """Spin the nodes until ``duration`` ends; True if a child process exited by itself."""
+    """Spin the nodes until ``duration`` ends or a signal; True if a child process exited by
+    itself. The executor is shut down after the stop (``StopOnShutdown``) has let rclpy's signal
+    thread finish with its guard condition."""
     from rclpy.executors import SingleThreadedExecutor
 
     from feeder_ros.nodes import runner
@@ -248,16 +248,17 @@ def _spin_composed(
     executor = SingleThreadedExecutor()
     nodes = []
     try:
-        for launch in cell.nodes:
-            print(f"[cell] composing {launch.fully_qualified_name}", flush=True)
-            node = classes[launch.executable](cli_args=launch.ros_arguments(parameters_file))
-            nodes.append(node)
-            executor.add_node(node)
-        deadline = None if duration is None else time.monotonic() + duration
-        while deadline is None or time.monotonic() < deadline:
-            executor.spin_once(timeout_sec=0.1)
-            if _one_exited(children):
-                return True
+        with runner.StopOnShutdown(context):
+            for launch in cell.nodes:
+                print(f"[cell] composing {launch.fully_qualified_name}", flush=True)
+                node = classes[launch.executable](cli_args=launch.ros_arguments(parameters_file))
+                nodes.append(node)
+                executor.add_node(node)
+            deadline = None if duration is None else time.monotonic() + duration
+            while deadline is None or time.monotonic() < deadline:
+                executor.spin_once(timeout_sec=0.1)
+                if _one_exited(children):
+                    return True
         return False
     finally:
         # wait for callbacks in flight and end the executor's worker threads (left running, they

@@ -39,6 +39,14 @@ class StopOnShutdown:
     (``RuntimeError: Unable to convert call argument '0' to Python object``, seen when a cell
     stopped its nodes) a moment before ``context.ok()`` turns false: a ``RuntimeError`` is a stop
     if the context goes down within ``shutdown_wait_s``.
+
+    A Ctrl-C also waits (as long) for that thread before the block ends: Python raises the
+    ``KeyboardInterrupt`` as soon as the main thread runs, and rclpy's signal thread (Jazzy 7.1,
+    Kilted 9.1) may not have run yet. That thread triggers every executor's SIGINT guard
+    condition and then shuts the contexts down; an executor shut down in between frees a guard
+    condition it is about to trigger. Measured with the thread starved (SCHED_IDLE beside three
+    busy processes): a composed cell crashed (SIGSEGV) in 2 of 6 stops, and CI saw a cell hang in
+    ``uninstall_signal_handlers``. Once the context is down the thread has done both.
     """
 
     #: how long a RuntimeError waits for the context's shutdown to show [s]
@@ -64,6 +72,8 @@ class StopOnShutdown:
     ) -> bool:
         if kind is None:
             return False
+        if issubclass(kind, KeyboardInterrupt):
+            self._shutting_down()  # rclpy's signal thread first (see above)
         requested = issubclass(kind, KeyboardInterrupt | ExternalShutdownException) or (
             issubclass(kind, RuntimeError) and self._shutting_down()
         )

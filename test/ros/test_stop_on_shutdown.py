@@ -31,9 +31,31 @@ def _guard(down_after_s: float | None) -> StopOnShutdown:
 @pytest.mark.parametrize("error", [KeyboardInterrupt, ExternalShutdownException])
 def test_a_signal_is_a_stop(error: type[BaseException]) -> None:
     guard = _guard(None)
+    guard.shutdown_wait_s = 0.1
     with guard:
         raise error()
     assert guard.stopped
+
+
+def test_a_ctrl_c_ends_the_block_once_the_signal_thread_shut_the_context_down() -> None:
+    # the KeyboardInterrupt comes first; rclpy's signal thread triggers the executors' guard
+    # conditions and shuts the context down after it: nothing may be torn down before that
+    context = FakeContext(0.2)
+    guard = StopOnShutdown(cast(Any, context))
+    with guard:
+        raise KeyboardInterrupt
+    assert not context.ok()
+    assert guard.stopped
+
+
+def test_a_ctrl_c_without_rclpys_handlers_still_stops_after_the_wait() -> None:
+    guard = _guard(None)
+    guard.shutdown_wait_s = 0.2
+    started = time.monotonic()
+    with guard:
+        raise KeyboardInterrupt
+    assert guard.stopped
+    assert time.monotonic() - started >= 0.2
 
 
 def test_a_take_failing_just_before_the_signals_shutdown_shows_is_a_stop() -> None:
