@@ -44,9 +44,10 @@ class StopOnShutdown:
     ``KeyboardInterrupt`` as soon as the main thread runs, and rclpy's signal thread (Jazzy 7.1,
     Kilted 9.1) may not have run yet. That thread triggers every executor's SIGINT guard
     condition and then shuts the contexts down; an executor shut down in between frees a guard
-    condition it is about to trigger. Measured with the thread starved (SCHED_IDLE beside three
-    busy processes): a composed cell crashed (SIGSEGV) in 2 of 6 stops, and CI saw a cell hang in
-    ``uninstall_signal_handlers``. Once the context is down the thread has done both.
+    condition it is about to trigger. CI saw a composed cell hang in
+    ``uninstall_signal_handlers``; with the thread starved (SCHED_IDLE beside three busy
+    processes) a composed cell crashed (SIGSEGV) in 2 of 18 stops. Once the context is down the
+    thread has done both.
     """
 
     #: how long a RuntimeError waits for the context's shutdown to show [s]
