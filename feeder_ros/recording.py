@@ -313,7 +313,13 @@ def forward(
     try:
         with RosSession(args=list(args) if args is not None else None) as init:
             context = init.context
-            node = TopicRecorder(sink, options, summary, *name_and_verb)
+            try:
+                node = TopicRecorder(sink, options, summary, *name_and_verb)
+            except Exception:
+                if context.ok():
+                    raise
+                summary.stopped_by = "signal"  # a Ctrl-C (rclpy shut the context down) came first
+                return
             executor = SingleThreadedExecutor(context=context)
             executor.add_node(node)
             if on_ready is not None:

@@ -234,3 +234,63 @@ def test_only_the_first_interrupt_raises_within_the_block() -> None:
         assert signal.getsignal(signal.SIGINT) is signal.SIG_IGN  # ending: ignored to the exit
     finally:
         signal.signal(signal.SIGINT, before)
+
+
+CTRL_C_UNDER_RCLPY = """
+import os, signal, sys, time
+from rclpy.utilities import get_default_context
+from feeder_ros import recording
+from feeder_ros.cli.interrupts import first_interrupt_stops
+from feeder_ros.ros_compat import RosSession
+
+def down(context):
+    deadline = time.monotonic() + 10.0
+    while context.ok() and time.monotonic() < deadline:
+        time.sleep(0.01)
+    return not context.ok()
+
+raised = 0
+with first_interrupt_stops():
+    with RosSession() as session:  # rclpy's signal handlers installed
+        try:
+            os.kill(os.getpid(), signal.SIGINT)
+            print("context down:", down(session.context), flush=True)
+        except KeyboardInterrupt:
+            raised += 1
+print("raised:", raised, flush=True)
+
+# a Ctrl-C while forward() makes its node: the node meets a context rclpy has shut down
+real = recording.TopicRecorder
+def interrupted_recorder(*args):
+    os.kill(os.getpid(), signal.SIGINT)
+    down(get_default_context())
+    return real(*args)
+recording.TopicRecorder = interrupted_recorder
+
+class Sink:
+    closed = 0
+    def close(self):
+        Sink.closed += 1
+
+summary = recording.Forwarded()
+selection = recording.TopicSelection(namespace="/sig_forward")
+with first_interrupt_stops():
+    recording.forward(Sink(), selection, summary, ("sig_forward", "forwarding"))
+print("stopped by:", summary.stopped_by, "sink closed:", Sink.closed > 0, flush=True)
+"""
+
+
+def test_under_rclpys_handlers_a_ctrl_c_stops_by_the_context_and_raises_nothing() -> None:
+    """rclpy shuts the context down on a Ctrl-C; an exception raised from the handler as well
+    landed, once, in rclpy's ``Task.__del__`` (swallowed, its traceback printed). A Ctrl-C in
+    the moment ``forward`` makes its node is a stop too, not an error."""
+    child = subprocess.run(
+        [sys.executable, "-c", CTRL_C_UNDER_RCLPY], capture_output=True, text=True, timeout=120
+    )
+    assert child.returncode == 0, child.stderr[-3000:]
+    assert child.stdout.splitlines() == [
+        "context down: True",
+        "raised: 0",
+        "stopped by: signal sink closed: True",
+    ], child.stderr[-3000:]
+    assert "Traceback" not in child.stderr

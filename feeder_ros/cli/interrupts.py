@@ -6,11 +6,17 @@ gets it, and then once more from the cell, which stops its children with SIGINT.
 ``KeyboardInterrupt`` raised while the first one's stop was closing the bag or the server, or
 printing the summary, cut that short ("feeder: interrupted", exit 130, no summary). A teardown
 that hangs is still ended, by the runner's watchdog (``runner.TEARDOWN_LIMIT_S``).
+
+While rclpy's SIGINT handler is installed the first Ctrl-C raises nothing: rclpy's signal thread
+shuts the context down and the spin loop, which watches it, stops by itself. An exception raised
+from a signal handler lands in whatever Python runs at that moment; in a finalizer (CI saw
+rclpy's ``Task.__del__``) Python swallows it and prints its traceback.
 """
 
 from __future__ import annotations
 
 import signal
+import sys
 import threading
 from collections.abc import Iterator
 from contextlib import contextmanager
@@ -19,12 +25,23 @@ from types import FrameType
 __all__ = ["first_interrupt_stops"]
 
 
+def rclpy_handles_sigint() -> bool:
+    """Whether rclpy's SIGINT handler is installed (it shuts the contexts down on a Ctrl-C).
+    Imports nothing: without rclpy loaded, no."""
+    signals = sys.modules.get("rclpy.signals")
+    return signals is not None and signals.get_current_signal_handlers_options().name in (
+        "SIGINT",
+        "ALL",
+    )
+
+
 @contextmanager
 def first_interrupt_stops() -> Iterator[None]:
-    """Within the block, the first SIGINT raises ``KeyboardInterrupt`` (rclpy's own handler,
-    installed over this one while a context runs, shuts the context down first and then calls
-    it), later ones do nothing, also after the block. Not interrupted, the block restores the
-    previous handler. Outside the main thread (where no handler can be set) a no-op."""
+    """Within the block, the first SIGINT stops: it raises ``KeyboardInterrupt`` unless rclpy's
+    handler (installed over this one while a context runs; it calls this one too) shuts the
+    context down instead. Later ones do nothing, also after the block. Not interrupted, the
+    block restores the previous handler. Outside the main thread (where no handler can be set)
+    a no-op."""
     if threading.current_thread() is not threading.main_thread():
         yield
         return
@@ -34,7 +51,8 @@ def first_interrupt_stops() -> Iterator[None]:
         nonlocal interrupted
         if not interrupted:
             interrupted = True
-            raise KeyboardInterrupt
+            if not rclpy_handles_sigint():
+                raise KeyboardInterrupt
 
     previous = signal.signal(signal.SIGINT, on_sigint)
     try:
