@@ -107,6 +107,10 @@ class FaultCell:
                 process.wait()
                 print(f"--- {name} did not stop on Ctrl-C:\n{process.output()[-3000:]}")
 
+    def print_outputs(self) -> None:
+        for name, process in self.processes.items():
+            print(f"--- {name} (exit status {process.poll()}):\n{process.output()[-3000:]}")
+
     def status_name(self, node: str, what: str) -> str:
         return f"{self.namespace}/{node}: {what}"
 
@@ -146,6 +150,9 @@ def running_cell(tmp_path: Path, namespace: str) -> Iterator[tuple[FaultCell, Se
             finally:
                 executor.remove_node(controller)
                 controller.destroy_node()
+    except BaseException:
+        cell.print_outputs()  # a failure shows what each node logged (a latched fault, ...)
+        raise
     finally:
         cell.stop_all()
 
@@ -171,7 +178,12 @@ def _drive(controller: Any) -> None:
             and controller.drive_state.state == DriveState.STATE_RUNNING
         ),
         30.0,
-    )
+    ), f"drive state {controller.state_name()}: {_fault_reason(controller)!r}"
+
+
+def _fault_reason(controller: Any) -> str:
+    state = controller.drive_state
+    return "no drive/state heard" if state is None else str(state.fault_reason)
 
 
 def _within(seen: Seen, name: str, since: float, limit_s: float, predicate: Any) -> float:
@@ -295,9 +307,16 @@ def test_drive_interface_killed_simulator_stops_the_carrier_and_it_rejoins(
         restarted = time.monotonic()
         cell.start("drive_interface")
         # the new process is heard (its diagnostics, unconfigured) before its services are
-        # called: the killed one's stay in discovery until its lease ends
+        # called: the killed one's stay in discovery until its lease ends. Unconfigured, not
+        # just any status: a loaded probe can hand over the killed one's last ones late
         drive = cell.status_name("drive_interface", "drive")
-        _within(seen, drive, restarted, 30.0, lambda level, text, values: True)
+        _within(
+            seen,
+            drive,
+            restarted,
+            30.0,
+            lambda level, text, values: values.get("lifecycle") == "unconfigured or finalized",
+        )
         controller.drive_state = None
         controller.bring_up()
         _drive(controller)
