@@ -139,6 +139,9 @@ class DriveInterface(LifecycleNode):
         self._controller: DriveController | None = None
         self._backend: DriveBackend | None = None
         self._backend_fault = ""
+        # the backend's status as the last control tick saw it: diagnostics report that one, so
+        # they never name a fault the controller has not latched yet (and the state says so)
+        self._backend_status: BackendStatus | None = None
         self._logged_fault = ""  # the latched fault reason last logged (each new one is logged)
         self._speed_source = "none"
         self._command_pub: Any = None
@@ -265,6 +268,7 @@ class DriveInterface(LifecycleNode):
                 modbus_settings_from(values), register_map_from(values)
             )
         self._backend_fault = ""
+        self._backend_status = None
         self._backend.connect()
         table = source.enabled and not source.file
         self._speed_feedback.configure(
@@ -403,7 +407,7 @@ class DriveInterface(LifecycleNode):
         now = self._now()
         if self._sim_stalls is not None and self._sim_stalls.resuming(time.monotonic()):
             self._sim_listening = time.monotonic()  # (called here only: once per loop tick)
-        status = backend.status()
+        status = self._backend_status = backend.status()
         if status.fault != self._backend_fault:
             was_faulted = bool(self._backend_fault)
             self._backend_fault = status.fault
@@ -527,7 +531,7 @@ class DriveInterface(LifecycleNode):
                 {"lifecycle": "unconfigured or finalized"},
             )
             return
-        status: BackendStatus = backend.status()
+        status = self._backend_status if self._backend_status is not None else backend.status()
         now = self._now()
         age = controller.watchdog.age_s(now)
         tracked = self._tracked
