@@ -7,6 +7,7 @@ import shlex
 import signal
 import subprocess
 import sys
+import time
 from pathlib import Path
 
 import pytest
@@ -16,6 +17,7 @@ from simulator_process import manual_cell_file
 from stuck_code import TEARDOWN_TIMEOUT_TEXT, stuck_teardown_script
 
 from feeder_ros.cell import CellError, load_cell, parameters_document
+from feeder_ros.cli import cell as cell_command
 from feeder_ros.cli.cell import node_executables
 from feeder_ros.cli.main import main
 
@@ -217,6 +219,67 @@ def test_a_composed_cell_whose_teardown_hangs_still_ends(tmp_path: Path) -> None
     assert "[cell] composing /side/feeder_b/manual_drive" in result.stdout
     assert TEARDOWN_TIMEOUT_TEXT in result.stderr
     assert "in stuck" in result.stderr  # the stuck call, named on stderr
+
+
+CHILD_WITH_A_STUCK_TEARDOWN = """
+import os
+import sys
+
+if os.path.basename(sys.argv[0]) == "manual_drive":  # only the cell's manual_drive child
+    exec(compile(open(os.environ["STUCK_SCRIPT"]).read(), "stuck_script", "exec"))
+"""
+
+
+def test_a_cell_waits_out_a_nodes_stuck_teardown_and_names_it(tmp_path: Path) -> None:
+    # the manual_drive process's destroy_node spins for good (as Fast DDS's participant
+    # teardown once did); its own watchdog ends it, and the cell says which node failed
+    stuck = tmp_path / "stuck.py"
+    stuck.write_text(
+        stuck_teardown_script(
+            "from feeder_ros.nodes import manual_drive\n"
+            "manual_drive.NODE_CLASS.destroy_node = stuck\n"
+        )
+    )
+    site = tmp_path / "site"
+    site.mkdir()
+    (site / "sitecustomize.py").write_text(CHILD_WITH_A_STUCK_TEARDOWN)
+    env = dict(os.environ, PYTHONPATH=str(site), STUCK_SCRIPT=str(stuck))
+    config = manual_cell_file(tmp_path / "cell.yaml", "stuck_cell", ["/stuck/feeder_1"])
+    process = subprocess.Popen(
+        [str(BIN / "feeder"), "cell", "--config", str(config)],
+        stdout=subprocess.PIPE,
+        stderr=subprocess.STDOUT,
+        text=True,
+        env=env,
+    )
+    try:
+        with probe_node() as node:
+
+            def up() -> bool:
+                return ("manual_drive", "/stuck/feeder_1") in node.get_node_names_and_namespaces()
+
+            assert wait_until(up, 60.0), node.get_node_names_and_namespaces()
+        start = time.monotonic()
+        process.send_signal(signal.SIGINT)
+        output, _ = process.communicate(timeout=30)
+        took = time.monotonic() - start
+    finally:
+        if process.poll() is None:
+            process.kill()
+    assert process.returncode == 1, output
+    assert "[cell] /stuck/feeder_1/manual_drive ended its stop with exit status 1" in output
+    assert TEARDOWN_TIMEOUT_TEXT in output  # its own watchdog ended it ...
+    assert "in stuck" in output  # ... with its stacks
+    assert "killed" not in output
+    assert "platform_simulator ended" not in output
+    assert took < cell_command.STOP_LIMIT_S, (took, output)  # 3 s limit here: never killed
+
+
+def test_the_cell_outwaits_a_nodes_own_teardown_limit() -> None:
+    from feeder_ros.nodes import runner
+
+    spin_stop_s = runner.StopOnShutdown.shutdown_wait_s + 1.0  # a callback in flight
+    assert runner.TEARDOWN_LIMIT_S + spin_stop_s <= cell_command.STOP_LIMIT_S
 
 
 def test_cell_refuses_a_bad_description_before_starting_anything(tmp_path: Path) -> None:

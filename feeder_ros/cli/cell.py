@@ -38,9 +38,10 @@ if TYPE_CHECKING:
 HELP = "start a feeder cell (all its nodes) from a cell description; Ctrl-C stops it"
 EPILOG = """\
 Ctrl-C: the normal way to stop a running cell (SIGTERM too): every node started so far is
-stopped, then exit status 0. A node still running 10 s later is killed (--composed: a teardown
-stuck in the middleware ends the process after 10 s): exit status 1. A node that exits by itself
-stops the cell: exit status 1. A Ctrl-C before the cell starts (its '[cell] NAME: N nodes' line)
+stopped, then exit status 0. A node whose teardown hangs in the middleware ends itself 5 s
+after its spin stopped (--composed: the process), one still running 8 s after the stop is
+killed: exit status 1, and the node named. A node that exits by itself stops the cell: exit
+status 1. A Ctrl-C before the cell starts (its '[cell] NAME: N nodes' line)
 cuts the command short: exit status 130.
 
 --foxglove runs 'feeder view' beside the nodes (its own process): every topic of the cell on
@@ -57,6 +58,11 @@ examples:
   # the nodes' command lines, their parameters written to parameters.yaml
   feeder cell --list --params-out parameters.yaml"""
 CELL_FILE = "cell.yaml"
+#: seconds the cell waits for its nodes to end after it interrupted them, before it kills them:
+#: a node stops spinning within ~1 s (``runner.StopOnShutdown``) and bounds its own teardown by
+#: ``runner.TEARDOWN_LIMIT_S`` (5 s, not imported here: rclpy takes seconds to load), so a node
+#: stuck in the middleware ends by its own watchdog, its stacks printed, before this kill
+STOP_LIMIT_S = 8.0
 _PR_SET_PDEATHSIG = 1
 
 
@@ -175,18 +181,28 @@ def run_processes(
 
 
 def _stop_all(children: Children) -> int:
-    for _, process in children:
+    """Interrupt every child still running and wait for all (killing those still running
+    ``STOP_LIMIT_S`` later); 1 if one was killed or ended its stop with a status other than 0
+    (each named), else 0. A child that had exited before the stop was reported then."""
+    stopping = []
+    for name, process in children:
         if process.poll() is None:
             process.send_signal(signal.SIGINT)
-    deadline = time.monotonic() + 10.0
+            stopping.append((name, process))
+    deadline = time.monotonic() + STOP_LIMIT_S
     status = 0
-    for name, process in children:
+    for name, process in stopping:
         try:
-            process.wait(timeout=max(deadline - time.monotonic(), 0.1))
+            code = process.wait(timeout=max(deadline - time.monotonic(), 0.1))
         except subprocess.TimeoutExpired:
-            print(f"[cell] {name} did not stop: killed", flush=True)
+            print(f"[cell] {name} did not stop within {STOP_LIMIT_S:g} s: killed", flush=True)
             process.kill()
             process.wait()
+            status = 1
+            continue
+        # -SIGINT: the interrupt ended a node still loading its modules (before its handler)
+        if code not in (0, -signal.SIGINT):
+            print(f"[cell] {name} ended its stop with exit status {code}", flush=True)
             status = 1
     return status
 

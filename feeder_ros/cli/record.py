@@ -24,7 +24,7 @@ HELP = "record feeder topics from the ROS graph into a rosbag2 (MCAP) bag"
 EPILOG = """\
 Ctrl-C: the normal way to end a recording (SIGTERM too, or --duration): the bag is closed,
 complete and readable, its summary printed, then exit status 0 (1 if the middleware's teardown
-hung, ended after 10 s; the bag is closed before it). A Ctrl-C before the bag exists (while the
+hung, ended after 5 s; the bag is closed before it). A Ctrl-C before the bag exists (while the
 command starts) records nothing: exit status 130.
 
 examples:

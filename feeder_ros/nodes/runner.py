@@ -22,9 +22,12 @@ from feeder_ros.ros_compat import RosSession
 #: stopped; past that the process ends with status 1 and every thread's stack on stderr. The DDS
 #: teardown can hang: a node stopped by SIGTERM when its cell supervisor was killed once spun for
 #: good in Fast DDS's ``DomainParticipant::set_listener`` (``rmw_destroy_node`` ->
-#: ``destroy_participant``), an orphan burning a core. faulthandler's watchdog is a C thread, so
-#: it fires even while that C call holds the GIL.
-TEARDOWN_LIMIT_S = 10.0
+#: ``destroy_participant``), an orphan burning a core; on Kilted a speed monitor stopped by its
+#: cell hung there for 10 s. faulthandler's watchdog is a C thread, so it fires even while that
+#: C call holds the GIL. A whole cell's teardown takes 1.4-2.5 s (two busy processes beside it);
+#: 5 s is ROS launch's default wait between SIGINT and SIGTERM. ``feeder cell`` waits longer
+#: (``cli.cell.STOP_LIMIT_S``), so such a node ends by this limit, its stacks printed.
+TEARDOWN_LIMIT_S = 5.0
 
 
 class StopOnShutdown:
