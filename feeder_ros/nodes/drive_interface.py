@@ -138,7 +138,6 @@ class DriveInterface(LifecycleNode):
 
         self._controller: DriveController | None = None
         self._backend: DriveBackend | None = None
-        self._backend_fault = ""
         # the backend's status as the last control tick saw it: diagnostics report that one, so
         # they never name a fault the controller has not latched yet (and the state says so)
         self._backend_status: BackendStatus | None = None
@@ -267,7 +266,6 @@ class DriveInterface(LifecycleNode):
             self._backend = ModbusTcpBackend(
                 modbus_settings_from(values), register_map_from(values)
             )
-        self._backend_fault = ""
         self._backend_status = None
         self._backend.connect()
         table = source.enabled and not source.file
@@ -408,9 +406,8 @@ class DriveInterface(LifecycleNode):
         if self._sim_stalls is not None and self._sim_stalls.resuming(time.monotonic()):
             self._sim_listening = time.monotonic()  # (called here only: once per loop tick)
         status = self._backend_status = backend.status()
-        if status.fault != self._backend_fault:
-            was_faulted = bool(self._backend_fault)
-            self._backend_fault = status.fault
+        if status.fault != controller.backend_fault:
+            was_faulted = bool(controller.backend_fault)
             controller.set_backend_fault(now, status.fault)
             if status.fault and not was_faulted:
                 self.get_logger().error(f"backend fault: {status.fault}")
