@@ -16,7 +16,9 @@ runs until Ctrl-C, SIGTERM or its duration.
 
 from __future__ import annotations
 
+import socket
 import threading
+import time
 from collections.abc import Callable, Sequence
 from dataclasses import dataclass
 from typing import TYPE_CHECKING, Any
@@ -31,7 +33,8 @@ LOCALHOST = "127.0.0.1"
 
 
 class LiveViewError(RuntimeError):
-    """The server could not start (the port taken, the host unknown); the message says which."""
+    """The server could not start (the port taken, the host unknown) or, stopped, did not free
+    its port; the message says which."""
 
 
 class FoxgloveSink:
@@ -54,6 +57,7 @@ class FoxgloveSink:
             raise LiveViewError(f"cannot serve the live view on {host}:{port}: {error}") from None
         self.host = host
         self.port = int(self._server.port)
+        self._stopped = False
 
     @property
     def url(self) -> str:
@@ -87,11 +91,44 @@ class FoxgloveSink:
         self._channels[topic].log(data, log_time=log_time_ns)
 
     def close(self) -> None:
+        """Close the channels and stop the server; once this returns the port is free (a new
+        server may take it; a client's connection is refused). ``foxglove-sdk``'s ``stop``
+        returns before its listener has closed: a connection right after it was accepted and
+        dropped (CI; 6 of 200 here), so the port is watched until it can be bound, up to
+        :attr:`release_limit_s` (then :class:`LiveViewError`, naming it)."""
         with self._lock:
             channels, self._channels = list(self._channels.values()), {}
+            stopping, self._stopped = not self._stopped, True
         for channel in channels:
             channel.close()
+        if not stopping:
+            return
         self._server.stop()
+        if not _port_released(self.host, self.port, self.release_limit_s):
+            raise LiveViewError(
+                f"the live view's port {self.host}:{self.port} was still taken "
+                f"{self.release_limit_s:g} s after its server stopped"
+            )
+
+    #: how long :meth:`close` waits for the stopped server's listener to close [s]
+    release_limit_s = 2.0
+
+
+def _port_released(host: str, port: int, limit_s: float) -> bool:
+    """Whether a socket can bind ``host:port`` (as a new server's would, ``SO_REUSEADDR``)
+    within ``limit_s``: no listener holds it any more."""
+    family = socket.getaddrinfo(host, port, type=socket.SOCK_STREAM)[0][0]
+    deadline = time.monotonic() + limit_s
+    while True:
+        with socket.socket(family, socket.SOCK_STREAM) as probe:
+            probe.setsockopt(socket.SOL_SOCKET, socket.SO_REUSEADDR, 1)
+            try:
+                probe.bind((host, port))
+                return True
+            except OSError:
+                if time.monotonic() > deadline:
+                    return False
+        time.sleep(0.005)
 
 
 @dataclass(frozen=True)

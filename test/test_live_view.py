@@ -4,6 +4,7 @@ bytes written, which an independent reader (rosbags) decodes from the advertised
 
 from __future__ import annotations
 
+import socket
 import struct
 from collections.abc import Iterator
 
@@ -13,7 +14,7 @@ from rosbags.typesys import Stores, get_types_from_msg, get_typestore
 
 from feeder_ros.bag.errors import UnknownTypeError
 from feeder_ros.bag.schemas import ros2msg_schema
-from feeder_ros.live_view import FoxgloveSink, LiveViewError
+from feeder_ros.live_view import LOCALHOST, FoxgloveSink, LiveViewError
 
 CDR_LE = b"\x00\x01\x00\x00"  # the encapsulation header of little-endian plain CDR
 
@@ -82,6 +83,20 @@ def test_an_unknown_type_or_a_second_channel_is_refused_by_name(sink: FoxgloveSi
 def test_a_taken_port_is_refused_with_the_port(sink: FoxgloveSink) -> None:
     with pytest.raises(LiveViewError, match=f"127.0.0.1:{sink.port}: .*in use"):
         FoxgloveSink(port=sink.port)
+
+
+def test_a_closed_views_port_is_free_at_once() -> None:
+    # foxglove-sdk's stop returns before its listener closes: a connection right after it was
+    # accepted and dropped (CI), and a server started again on the port could find it taken
+    first = FoxgloveSink(port=0)
+    port = first.port
+    first.close()
+    for _ in range(50):
+        sink = FoxgloveSink(port=port)  # the port closed just before: free
+        sink.add_topic("/x", "std_msgs/msg/Float64")
+        sink.close()
+        with pytest.raises(ConnectionRefusedError):
+            socket.create_connection((LOCALHOST, port), timeout=2.0).close()
 
 
 def test_close_stops_the_server_and_may_be_repeated() -> None:
