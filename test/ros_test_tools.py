@@ -144,6 +144,7 @@ def call(
     request: Any,
     timeout_s: float = 30.0,
     attempt_s: float = 5.0,
+    repeatable: bool | None = None,
 ) -> Any:
     """Call a service from the test thread (the probe's executor thread delivers the answer).
 
@@ -152,14 +153,18 @@ def call(
     drops the reply ("failed to send response (timeout)" in the server's log). So a request of
     :data:`REPEATABLE_SERVICES` is sent again when ``attempt_s`` pass without an answer (until
     ``timeout_s``; :func:`feeder_ros.nodes.service_calls.call_service`). Other requests are sent
-    once: sent twice, they could act twice. (Waiting after a new client is seen would not be safe
-    either: tests time what a call sets off from just before it.)"""
+    once: sent twice, they could act twice; ``repeatable=True`` marks one that cannot (a request
+    the server refuses, the first call of a new client being the exposed one). (Waiting after a
+    new client is seen would not be safe either: tests time what a call sets off from just
+    before it.)"""
     clients = _clients.setdefault(node, {})
     client = clients.get((service_type, name))
     if client is None:
         client = clients[(service_type, name)] = node.create_client(service_type, name)
     assert client.wait_for_service(timeout_sec=timeout_s), f"{name} not available"
-    ask_again_s = attempt_s if service_type in REPEATABLE_SERVICES else None
+    if repeatable is None:
+        repeatable = service_type in REPEATABLE_SERVICES
+    ask_again_s = attempt_s if repeatable else None
     try:
         return call_service(client, request, timeout_s, ask_again_s)
     except ServiceCallError as error:
