@@ -92,7 +92,8 @@ def run_node(make_node: Callable[[], Node], args: Sequence[str] | None = None) -
     supervisor stopping the node gets the same orderly exit: node destroyed, context shut down,
     exit status 0. A teardown that takes longer than :data:`TEARDOWN_LIMIT_S` ends the process
     with status 1 (stacks on stderr). Bad ROS arguments (an unreadable or malformed params file)
-    and parameter values the node refuses end it with status 2 and the reason logged.
+    and parameter values the node refuses end it with status 2 and the reason logged. A stop
+    while the node is being built ends it with status 0 too.
     """
     argv = list(sys.argv if args is None else args)
     try:
@@ -106,9 +107,15 @@ def run_node(make_node: Callable[[], Node], args: Sequence[str] | None = None) -
         with initialized:
             try:
                 node = make_node()
-            except (ParameterError, ParameterException, ValueError) as error:
-                rclpy.logging.get_logger("feeder_ros").error(f"refusing to start: {error}")
-                return 2
+            except Exception as error:
+                if not initialized.context.ok():
+                    # stopped (SIGINT, SIGTERM) while the node was built: rclpy shut the context
+                    # down under it, whatever failed next ("context is not valid") is that stop
+                    return 0
+                if isinstance(error, ParameterError | ParameterException | ValueError):
+                    rclpy.logging.get_logger("feeder_ros").error(f"refusing to start: {error}")
+                    return 2
+                raise
             executor = SingleThreadedExecutor()
             executor.add_node(node)
             try:
