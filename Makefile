@@ -78,7 +78,8 @@ $(STAMPS)/package: $(STAMPS)/interfaces setup.py
 
 # numba compiles the exact solver and the estimator on first use; do it once here (cached next to
 # the sources) so that nodes and tests start in a second instead of paying the compile each time.
-$(STAMPS)/solver-cache: $(STAMPS)/package $(wildcard feeder_ros/physics/*.py feeder_ros/estimation/*.py) \
+$(STAMPS)/solver-cache: $(STAMPS)/package $(wildcard feeder_ros/physics/*.py feeder_ros/physics/exact/*.py \
+		feeder_ros/estimation/*.py) \
 		tools/warm_solver_cache.py
 	$(PY) tools/warm_solver_cache.py
 	@touch $@

@@ -7,9 +7,9 @@ from collections.abc import Sequence
 
 import numpy as np
 
-from feeder_ros.physics import sharp_solver as _k
 from feeder_ros.physics.drive import DriveSchedule
 from feeder_ros.physics.errors import SimulationError
+from feeder_ros.physics.exact import layout, many_runs
 from feeder_ros.physics.live_simulator import _default_drive, _model_vector, _status_reason
 from feeder_ros.physics.parameters import FeederParameters, ParameterError
 from feeder_ros.physics.parameters import finite_number as _finite
@@ -71,8 +71,8 @@ def _simulate_many_from_rest(
     """Totals from rest at ``duration_s``, and at ``mid_s`` on the way if ``0 < mid_s``."""
     duration = _finite("duration_s", duration_s, positive=True)
     P = len(points)
-    models = np.zeros((P, _k.MODEL_SIZE))
-    states = np.zeros((P, _k.STATE_SIZE))
+    models = np.zeros((P, layout.MODEL_SIZE))
+    states = np.zeros((P, layout.STATE_SIZE))
     g_L, g_D, g_mass = np.zeros(P), np.zeros(P), np.zeros(P)
     offsets = np.zeros(P + 1, np.int64)
     starts, omegas, amps, phases, logged = [], [], [], [], []
@@ -88,9 +88,9 @@ def _simulate_many_from_rest(
         mass, mu_s, mu_d = part.resolved(params)
         kg = params.gravity_mps2 * params.friction_multiplier
         g_L[p], g_D[p], g_mass[p] = mu_s * kg, mu_d * kg, mass
-        model_track = models[p, _k.TRACK]
-        models[p, _k.TRACK] = model_track - part.position_m
-        states[p, _k.S_MODE] = 1.0
+        model_track = models[p, layout.TRACK]
+        models[p, layout.TRACK] = model_track - part.position_m
+        states[p, layout.S_MODE] = 1.0
         starts.append(seg.start_s)
         omegas.append(seg.omega_rad_s)
         amps.append(seg.amplitude_n)
@@ -99,7 +99,7 @@ def _simulate_many_from_rest(
         offsets[p + 1] = offsets[p] + seg.start_s.size
     results = np.zeros((P, 5))
     results_mid = np.zeros((P, 5))
-    _k.advance_many(
+    many_runs.advance_many(
         models,
         np.concatenate(starts) if P else np.zeros(0),
         np.concatenate(omegas) if P else np.zeros(0),
@@ -116,7 +116,7 @@ def _simulate_many_from_rest(
         results_mid,
         results,
     )
-    bad = np.flatnonzero(results[:, 0] != _k.STATUS_DONE)
+    bad = np.flatnonzero(results[:, 0] != layout.STATUS_DONE)
     if bad.size:
         shown = [f"point {p} ({_status_reason(int(results[p, 0]))})" for p in bad[:3].tolist()]
         more = f" and {bad.size - 3} more point(s)" if bad.size > 3 else ""

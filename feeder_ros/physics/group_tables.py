@@ -8,7 +8,7 @@ from typing import Literal
 
 import numpy as np
 
-from feeder_ros.physics import sharp_solver as _k
+from feeder_ros.physics.exact import layout
 from feeder_ros.physics.results import F64, I8, Phase
 
 __all__ = ["_Groups", "_Members", "_output_arrays"]
@@ -67,7 +67,7 @@ class _Groups:
     def sticking_group(self, L: float, D: float) -> int:
         """Index of an active sticking group with this friction, or -1."""
         hits = np.flatnonzero(
-            (self.head >= 0) & (self.phase == _k.STICK) & (self.L == L) & (self.D == D)
+            (self.head >= 0) & (self.phase == layout.STICK) & (self.L == L) & (self.D == D)
         )
         return int(hits[0]) if hits.size else -1
 
@@ -81,7 +81,7 @@ class _Groups:
 
     def has_duplicate_sticking(self) -> bool:
         """Whether two active sticking groups have the same friction (they could be merged)."""
-        live = (self.head >= 0) & (self.phase == _k.STICK)
+        live = (self.head >= 0) & (self.phase == layout.STICK)
         pairs = np.stack([self.L[live], self.D[live]], axis=1)
         return bool(pairs.shape[0] > np.unique(pairs, axis=0).shape[0])
 

@@ -1,9 +1,9 @@
 """The live, stateful exact simulator (:class:`FeederSimulator`): advance in chunks, change the
 drive, the parameters and the parts while it runs; the group and member tables it hands to the
-sharp solver's kernels, and the numba thread limit for parallel group passes.
+exact engine's kernels, and the numba thread limit for parallel group passes.
 
 The model and the engine: :mod:`feeder_ros.physics.simulation` and
-:mod:`feeder_ros.physics.sharp_solver`.
+:mod:`feeder_ros.physics.exact`.
 """
 
 from __future__ import annotations
@@ -19,9 +19,17 @@ import numba
 import numpy as np
 import numpy.typing as npt
 
-from feeder_ros.physics import sharp_solver as _k
 from feeder_ros.physics.drive import DriveChange, DriveSchedule
 from feeder_ros.physics.errors import SimulationError
+from feeder_ros.physics.exact import (
+    event_steps,
+    global_loop,
+    group_march,
+    layout,
+    ordering,
+    recorded_pieces,
+    sampling,
+)
 from feeder_ros.physics.group_tables import _Groups, _Members, _output_arrays
 from feeder_ros.physics.parameters import FeederParameters, ParameterError
 from feeder_ros.physics.parameters import finite_number as _finite
@@ -46,17 +54,17 @@ FORGET_DRIVE_CHANGES_AFTER = 8
 
 
 def _model_vector(params: FeederParameters, log_events: bool = True) -> F64:
-    model = np.zeros(_k.MODEL_SIZE)
+    model = np.zeros(layout.MODEL_SIZE)
     cos_t = params.cos_theta
-    model[_k.M_ONEWAY] = params.equivalent_mass_kg
-    model[_k.M_BASE] = params.carrier_mass_kg + params.mass_coefficient * params.plate_mass_kg
-    model[_k.DAMPING] = params.damping_ns_per_m
-    model[_k.K_FWD] = params.forward_stiffness_n_per_m * cos_t
-    model[_k.K_BWD] = params.backward_stiffness_n_per_m * cos_t
-    model[_k.TRACK] = params.track_length_m
-    model[_k.SWITCH] = 0.0 if params.stiffness_switch == "displacement" else 1.0
-    model[_k.COUPLING] = 0.0 if params.coupling == "one_way" else 1.0
-    model[_k.LOG_EVENTS] = 1.0 if log_events else 0.0
+    model[layout.M_ONEWAY] = params.equivalent_mass_kg
+    model[layout.M_BASE] = params.carrier_mass_kg + params.mass_coefficient * params.plate_mass_kg
+    model[layout.DAMPING] = params.damping_ns_per_m
+    model[layout.K_FWD] = params.forward_stiffness_n_per_m * cos_t
+    model[layout.K_BWD] = params.backward_stiffness_n_per_m * cos_t
+    model[layout.TRACK] = params.track_length_m
+    model[layout.SWITCH] = 0.0 if params.stiffness_switch == "displacement" else 1.0
+    model[layout.COUPLING] = 0.0 if params.coupling == "one_way" else 1.0
+    model[layout.LOG_EVENTS] = 1.0 if log_events else 0.0
     return model
 
 
@@ -107,18 +115,18 @@ class FeederSimulator:
         self._params = self._initial_params
         self._drive = self._initial_drive
         self._model = _model_vector(self._params)
-        self._state = np.zeros(_k.STATE_SIZE)
-        self._state[_k.S_X], self._state[_k.S_V] = self._initial_xv
+        self._state = np.zeros(layout.STATE_SIZE)
+        self._state[layout.S_X], self._state[layout.S_V] = self._initial_xv
         self._pending_events: list[tuple[float, int, int]] = []
         self._specs: list[PartSpec] = []
         self._g = _Groups.empty()
         self._m = _Members.empty()
-        self._state[_k.S_MODE] = self._classify()
+        self._state[layout.S_MODE] = self._classify()
         self._spawn_initial(self._initial_parts)
 
     @property
     def time_s(self) -> float:
-        return float(self._state[_k.S_T])
+        return float(self._state[layout.S_T])
 
     @property
     def params(self) -> FeederParameters:
@@ -137,9 +145,9 @@ class FeederSimulator:
     def carrier_state(self) -> tuple[float, float, int]:
         """(x_m, v_mps, branch) now."""
         return (
-            float(self._state[_k.S_X]),
-            float(self._state[_k.S_V]),
-            int(self._state[_k.S_MODE]),
+            float(self._state[layout.S_X]),
+            float(self._state[layout.S_V]),
+            int(self._state[layout.S_MODE]),
         )
 
     def _drive_now(self) -> tuple[float, float]:
@@ -154,29 +162,29 @@ class FeederSimulator:
 
     def _carrier_mass_and_reaction(self) -> tuple[float, float]:
         if self._params.coupling == "one_way":
-            return float(self._model[_k.M_ONEWAY]), 0.0
-        mass = float(self._model[_k.M_BASE])
+            return float(self._model[layout.M_ONEWAY]), 0.0
+        mass = float(self._model[layout.M_BASE])
         reaction = 0.0
         g = self._g
         for i in range(g.size):
             if g.head[i] < 0:
                 continue
-            if g.phase[i] == _k.STICK:
+            if g.phase[i] == layout.STICK:
                 mass += g.mass[i]
-            elif g.phase[i] == _k.SLIP_BACKWARD:
+            elif g.phase[i] == layout.SLIP_BACKWARD:
                 reaction -= g.mass[i] * g.D[i]
             else:
                 reaction += g.mass[i] * g.D[i]
         return mass, reaction
 
     def _classify(self) -> float:
-        x, v = float(self._state[_k.S_X]), float(self._state[_k.S_V])
+        x, v = float(self._state[layout.S_X]), float(self._state[layout.S_V])
         force, dforce = self._drive_now()
         mass, reaction = self._carrier_mass_and_reaction()
-        mode = float(self._state[_k.S_MODE]) if self._state[_k.S_MODE] != 0.0 else 1.0
+        mode = float(self._state[layout.S_MODE]) if self._state[layout.S_MODE] != 0.0 else 1.0
         return float(
-            _k._classify(
-                int(self._model[_k.SWITCH]),
+            event_steps._classify(
+                int(self._model[layout.SWITCH]),
                 mode,
                 x,
                 v,
@@ -184,8 +192,8 @@ class FeederSimulator:
                 dforce,
                 reaction,
                 mass,
-                float(self._model[_k.K_FWD]),
-                float(self._model[_k.K_BWD]),
+                float(self._model[layout.K_FWD]),
+                float(self._model[layout.K_BWD]),
             )
         )
 
@@ -203,9 +211,9 @@ class FeederSimulator:
         L, D = mu_s * kappa_g, mu_d * kappa_g
         index = len(self._specs)
         self._specs.append(spec)
-        carrier_v = float(self._state[_k.S_V])
+        carrier_v = float(self._state[layout.S_V])
         if at_rest and carrier_v != 0.0:
-            phase = _k.SLIP_FORWARD if carrier_v < 0.0 else _k.SLIP_BACKWARD
+            phase = layout.SLIP_FORWARD if carrier_v < 0.0 else layout.SLIP_BACKWARD
             g = self._g.slipping_group(L, D, phase, 0.0)
             if g < 0:
                 g = self._g.add(L, D, 0.0)
@@ -220,7 +228,7 @@ class FeederSimulator:
             mass=mass,
             slip0=self._g.slip[g],
             start_t=self.time_s,
-            start_x=spec.position_m + float(self._state[_k.S_X]),
+            start_x=spec.position_m + float(self._state[layout.S_X]),
         )
         self._g.join(g, index, self._m, mass)
         return index
@@ -243,7 +251,7 @@ class FeederSimulator:
         G = keys.shape[0]
         g = _Groups(G)
         g.L[:], g.D[:] = keys[:, 0], keys[:, 1]
-        g.u[:] = self._state[_k.S_V]
+        g.u[:] = self._state[layout.S_V]
         g.mass[:] = np.bincount(group, weights=mass, minlength=G)
         offset = np.array([spec.position_m for spec in specs], dtype=np.float64)
         g.lead[:] = -np.inf
@@ -266,7 +274,7 @@ class FeederSimulator:
         m.slip0 = np.zeros(N)
         m.exit_t = np.full(N, np.nan)
         m.start_t = np.zeros(N)
-        m.start_x = offset + self._state[_k.S_X]
+        m.start_x = offset + self._state[layout.S_X]
         self._g, self._m = g, m
 
     def _spawn_few(self, specs: Sequence[PartSpec], kappa_g: float) -> None:
@@ -297,8 +305,8 @@ class FeederSimulator:
             else:
                 nxt[last[gi]] = i
             last[gi] = i
-        v0 = float(self._state[_k.S_V])
-        x0 = float(self._state[_k.S_X])
+        v0 = float(self._state[layout.S_V])
+        x0 = float(self._state[layout.S_X])
         # the fields of one kind come from one array, each field a contiguous row of it (the
         # tables replace, never resize, their arrays)
         g = _Groups.__new__(_Groups)  # every field set below
@@ -333,7 +341,7 @@ class FeederSimulator:
             L, D = mu_s * kappa_g, mu_d * kappa_g
             og = int(members.group[i])
             ph = int(old.phase[og])
-            key = (og, L, D) if ph != _k.STICK else (-1, L, D)
+            key = (og, L, D) if ph != layout.STICK else (-1, L, D)
             ng = key_to_group.get(key, -1)
             if ng < 0:
                 ng = new.add(L, D, float(old.u[og]))
@@ -390,7 +398,7 @@ class FeederSimulator:
         for i, mass in enumerate(masses):
             self._m.mass[i] = mass
         self._regroup()
-        self._state[_k.S_MODE] = self._classify()  # the switching variable may have changed
+        self._state[layout.S_MODE] = self._classify()  # the switching variable may have changed
 
     # -- drive ---------------------------------------------------------------------------
     def set_drive(
@@ -437,7 +445,7 @@ class FeederSimulator:
                 raise ParameterError(
                     f"t_end_s={t_end_s!r} equals the simulator time: nothing to sample"
                 )
-            problem = _k.check_samples(samples)  # one pass, no temporaries
+            problem = sampling.check_samples(samples)  # one pass, no temporaries
             if problem == 1:
                 raise ParameterError("sample_times_s contains non-finite values")
             if problem == 2:
@@ -457,7 +465,7 @@ class FeederSimulator:
         march = self._params.coupling == "one_way" and self._march_pays(t_end - t_start)
         out_cx, out_cv, out_ca, out_cb, out_px, out_pv, out_pp = _output_arrays(n, N, march)
         seg = self._drive.segments()
-        self._state[_k.S_SEG] = seg.index_at(self.time_s)
+        self._state[layout.S_SEG] = seg.index_at(self.time_s)
         chunks: list[EventArrays] = []
         # events already due: drive changes at the chunk's start, and a logged drive change
         # exactly at its end (the kernel stops before it)
@@ -551,12 +559,12 @@ class FeederSimulator:
         cap = 1024 + 8 * (m.size + 1)
         ev_t, ev_kind, ev_part = np.empty(cap), np.empty(cap, np.int8), np.empty(cap, np.int64)
         piece_cap = min(64 + int(400 * (t_end - self.time_s)), 1 << 16) if record else 0
-        pieces = np.empty((piece_cap, _k.PIECE_WIDTH))
+        pieces = np.empty((piece_cap, recorded_pieces.PIECE_WIDTH))
         piece_chunks: list[F64] = []
         counters = np.zeros(5, np.int64)
         self._counters = counters
         while True:
-            status = _k.advance(  # type: ignore[call-arg]
+            status = global_loop.advance(  # type: ignore[call-arg]
                 self._model,
                 seg.start_s,
                 seg.omega_rad_s,
@@ -594,7 +602,7 @@ class FeederSimulator:
             if record:
                 piece_chunks.append(pieces[: int(counters[4])].copy())
                 counters[4] = 0
-            if status == _k.STATUS_BUFFER_FULL:
+            if status == layout.STATUS_BUFFER_FULL:
                 if k == 0:
                     cap *= 2
                     ev_t, ev_kind, ev_part = (
@@ -603,12 +611,12 @@ class FeederSimulator:
                         np.empty(cap, np.int64),
                     )
                 continue
-            if status != _k.STATUS_DONE:
+            if status != layout.STATUS_DONE:
                 reason = _status_reason(status)
                 raise SimulationError(f"sharp solver stopped at t={self.time_s!r} s: {reason}")
             break
         if not record:
-            return np.empty((0, _k.PIECE_WIDTH))
+            return np.empty((0, recorded_pieces.PIECE_WIDTH))
         return np.concatenate(piece_chunks) if piece_chunks else pieces[:0]
 
     def _run_groups(
@@ -631,7 +639,7 @@ class FeederSimulator:
         puts them in order (:class:`EventLog` calls it when the events are first read)."""
         g, m = self._g, self._m
         G = g.size
-        track = float(self._model[_k.TRACK])
+        track = float(self._model[layout.TRACK])
         pre_t = np.concatenate([c[0] for c in earlier]) if earlier else np.zeros(0)
         pre_kind = np.concatenate([c[1] for c in earlier]) if earlier else np.zeros(0, np.int8)
         pre_part = np.concatenate([c[2] for c in earlier]) if earlier else np.zeros(0, np.int64)
@@ -641,10 +649,14 @@ class FeederSimulator:
         for k0 in range(0, max(n_total, 1), self.pieces_per_pass):
             batch = np.ascontiguousarray(pieces[k0 : k0 + self.pieces_per_pass])
             nb = batch.shape[0]
-            tables = _k.piece_tables(batch, nb)  # shared by every group of the pass
+            tables = recorded_pieces.piece_tables(batch, nb)  # shared by every group of the pass
             final = k0 + nb >= n_total
-            t_stop = t_end if final else float(pieces[k0 + nb, _k.P_T0])
-            ns0 = int(np.searchsorted(samples, batch[0, _k.P_T0], side="left")) if nb else 0
+            t_stop = t_end if final else float(pieces[k0 + nb, recorded_pieces.P_T0])
+            ns0 = (
+                int(np.searchsorted(samples, batch[0, recorded_pieces.P_T0], side="left"))
+                if nb
+                else 0
+            )
             members_before = m.group.copy()
             saved = (g.copy(), m.copy())
             cap = 16 + 4 * nb
@@ -658,18 +670,18 @@ class FeederSimulator:
                     ev_part = np.empty((G, cap), np.int64)
                     ev_n = np.zeros(G, np.int64)
                     status = np.full(G, -1, np.int64)
-                    _k.advance_groups(  # type: ignore[call-arg]
+                    group_march.advance_groups(  # type: ignore[call-arg]
                         batch, nb, *tables, track, t_stop, samples, ns0, out_cx, out_cv,
                         g.L, g.D, g.mass, g.u, g.y, g.slip, g.lead, g.phase, g.head,
                         m.group, m.next, m.offset, m.mass, m.slip0, m.exit_t,
                         out_px, out_pv, out_pp, ev_t, ev_kind, ev_part, ev_n, status,
                     )  # fmt: skip
-                    if np.any(status[saved[0].head >= 0] == _k.STATUS_BUFFER_FULL):
+                    if np.any(status[saved[0].head >= 0] == layout.STATUS_BUFFER_FULL):
                         g.restore(saved[0])
                         m.restore(saved[1])
                         cap *= 2
                         continue
-                    bad = np.flatnonzero((status != _k.STATUS_DONE) & (status != -1))
+                    bad = np.flatnonzero((status != layout.STATUS_DONE) & (status != -1))
                     if bad.size:
                         raise SimulationError(
                             f"sharp solver (groups {bad.tolist()}) stopped: an event repeats "
@@ -695,15 +707,15 @@ class FeederSimulator:
         """Every part's track position now (its lab position less the carrier's), NaN for parts
         that left the track; no event, no change of state."""
         totals = self._totals()
-        track = totals["part_end_x_m"] - float(self._state[_k.S_X])
+        track = totals["part_end_x_m"] - float(self._state[layout.S_X])
         return np.where(np.isnan(totals["part_exit_t_s"]), track, np.nan)
 
     def _totals(self) -> dict[str, F64]:
         m, g = self._m, self._g
         N = m.size
-        start_t, start_x, end_t, end_x, slip, exit_t = _k.part_totals(
+        start_t, start_x, end_t, end_x, slip, exit_t = sampling.part_totals(
             m.group[:N], m.offset, m.slip0, m.exit_t, m.start_t, m.start_x, g.y, g.slip,
-            self.time_s, float(self._state[_k.S_X]),
+            self.time_s, float(self._state[layout.S_X]),
         )  # fmt: skip
         return {
             "part_start_t_s": start_t,
@@ -740,17 +752,17 @@ def _one_thread_if(serial: bool) -> contextlib.AbstractContextManager[None]:
 
 
 def _pass_events_in_time_order(serial: bool, *arrays: npt.NDArray[Any]) -> EventArrays:
-    """:func:`~feeder_ros.physics.sharp_solver.group_events_in_time_order` of one group pass, on
+    """:func:`~feeder_ros.physics.exact.ordering.group_events_in_time_order` of one group pass, on
     one thread if the pass ran on one."""
     with _one_thread_if(serial):
-        return _k.group_events_in_time_order(*arrays)
+        return ordering.group_events_in_time_order(*arrays)
 
 
 def _status_reason(status: int) -> str:
     """Why the sharp solver stopped, from its status code."""
     return {
-        _k.STATUS_RESONANCE: "exact resonance of an undamped branch (c = 0, drive frequency "
+        layout.STATUS_RESONANCE: "exact resonance of an undamped branch (c = 0, drive frequency "
         "equal to a branch natural frequency): no bounded closed form",
-        _k.STATUS_STUCK: "an event repeats at one instant without progress",
-        _k.STATUS_BUFFER_FULL: "the event buffer filled",
+        layout.STATUS_STUCK: "an event repeats at one instant without progress",
+        layout.STATUS_BUFFER_FULL: "the event buffer filled",
     }.get(status, f"status {status}")

@@ -14,7 +14,7 @@ from dataclasses import dataclass
 import numpy as np
 import numpy.typing as npt
 
-from feeder_ros.physics import sharp_solver as _k
+from feeder_ros.physics.exact import layout, ordering, sampling
 from feeder_ros.physics.parameters import FeederParameters, ParameterError
 from feeder_ros.physics.parameters import finite_number as _finite
 
@@ -45,14 +45,14 @@ class Phase(enum.IntEnum):
 class EventKind(enum.IntEnum):
     """Kinds of located events (``event_kind`` codes)."""
 
-    BRANCH_SWITCH = _k.EV_BRANCH  #: stiffness branch changes (carrier)
-    SLIP_START = _k.EV_SLIP_START  #: a sticking part starts to slip
-    STICK = _k.EV_STICK  #: relative velocity zero and the part sticks again
-    SLIP_REVERSAL = _k.EV_REVERSAL  #: relative velocity zero, the part slips the other way
-    DRIVE_CHANGE = _k.EV_DRIVE  #: a drive change (first step of a ramp) takes effect
-    PART_EXIT = _k.EV_EXIT  #: a part passes the track end
-    SLIDING_START = _k.EV_SLIDE_START  #: velocity switching: carrier held at x' = 0 (Filippov)
-    SLIDING_END = _k.EV_SLIDE_END  #: velocity switching: carrier released
+    BRANCH_SWITCH = layout.EV_BRANCH  #: stiffness branch changes (carrier)
+    SLIP_START = layout.EV_SLIP_START  #: a sticking part starts to slip
+    STICK = layout.EV_STICK  #: relative velocity zero and the part sticks again
+    SLIP_REVERSAL = layout.EV_REVERSAL  #: relative velocity zero, the part slips the other way
+    DRIVE_CHANGE = layout.EV_DRIVE  #: a drive change (first step of a ramp) takes effect
+    PART_EXIT = layout.EV_EXIT  #: a part passes the track end
+    SLIDING_START = layout.EV_SLIDE_START  #: velocity switching: carrier held at x' = 0 (Filippov)
+    SLIDING_END = layout.EV_SLIDE_END  #: velocity switching: carrier released
 
 
 @dataclass(frozen=True)
@@ -140,17 +140,17 @@ def _in_time_order(chunks: list[EventArrays]) -> EventArrays:
     """The chunks' events, one after the other, sorted stably by time."""
     if not chunks:
         return np.zeros(0), np.zeros(0, np.int8), np.zeros(0, np.int64)
-    if len(chunks) == 1 and _k.check_samples(chunks[0][0]) == 0:
+    if len(chunks) == 1 and sampling.check_samples(chunks[0][0]) == 0:
         # one chunk (fresh copies) already in time order: as it is
         t, kind, part = chunks[0]
         return t, kind.astype(np.int8, copy=False), part.astype(np.int64, copy=False)
     event_t = np.concatenate([c[0] for c in chunks])
     event_kind = np.concatenate([c[1] for c in chunks]).astype(np.int8, copy=False)
     event_part = np.concatenate([c[2] for c in chunks]).astype(np.int64, copy=False)
-    if _k.check_samples(event_t) != 0:
+    if sampling.check_samples(event_t) != 0:
         # out of order (a drive change at the chunk's end comes first) or not finite; the group
         # march's passes come in order one after the other and need no sort
-        order = _k.stable_time_order(event_t)
+        order = ordering.stable_time_order(event_t)
         event_t = event_t[order]
         event_kind = event_kind[order]
         event_part = event_part[order]

@@ -1,7 +1,7 @@
 """Public simulation API of the feeder model: carrier (platform) and parts in stick-slip.
 
 The sharp model (``stiffness_model="sharp"``) is solved exactly, event by event
-(:mod:`feeder_ros.physics.sharp_solver`): no time step, the only errors are floating-point round-off
+(:mod:`feeder_ros.physics.exact`): no time step, the only errors are floating-point round-off
 and root polishing to round-off level. ``simulate`` hands the logistic model to
 :func:`feeder_ros.physics.smooth_model.simulate_smooth`.
 

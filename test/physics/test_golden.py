@@ -1,6 +1,6 @@
 """Golden outputs of the exact physics engine, compared bit for bit (issue 30: "Golden first").
 
-Issue 30 restructures the event-driven engine (``feeder_ros/physics/sharp_solver.py``: ``advance``,
+Issue 30 restructures the event-driven engine (``feeder_ros/physics/exact/``: ``advance``,
 ``_march_group``, the group march, event ordering) and splits ``feeder_ros/physics/simulation.py``
 (``simulate``, ``simulate_parts``, ``simulate_carrier``, ``simulate_many``, the live
 ``FeederSimulator``). The refactor must not change a single bit of any result. These tests rerun

@@ -7,8 +7,8 @@ import pickle
 import numpy as np
 import pytest
 
-from feeder_ros.physics import sharp_solver as k
 from feeder_ros.physics.drive import DriveChange, DriveSchedule
+from feeder_ros.physics.exact import closed_form, ordering, recorded_pieces, search
 from feeder_ros.physics.parameters import FeederParameters
 from feeder_ros.physics.simulation import EventKind, FeederSimulator, PartSpec, SimulationResult
 
@@ -28,14 +28,14 @@ def _capture_piece_tables(
 ) -> list[tuple[np.ndarray, tuple[np.ndarray, ...]]]:
     """Record every ``piece_tables`` call of the group march: (its pieces, its tables)."""
     captured: list[tuple[np.ndarray, tuple[np.ndarray, ...]]] = []
-    real = k.piece_tables
+    real = recorded_pieces.piece_tables
 
     def spy(pieces: np.ndarray, n: int) -> tuple[np.ndarray, ...]:
         out: tuple[np.ndarray, ...] = real(pieces, n)
         captured.append((pieces[:n].copy(), out))
         return out
 
-    monkeypatch.setattr(k, "piece_tables", spy)
+    monkeypatch.setattr(recorded_pieces, "piece_tables", spy)
     return captured
 
 
@@ -55,17 +55,21 @@ def test_node_tables_hold_the_carrier_and_bound_it(monkeypatch: pytest.MonkeyPat
         count = start[p + 1] - start[p]
         assert count >= 2  # no held piece with displacement switching
         local = np.arange(count) * h[p]
-        local[-1] = pieces[p, k.P_LEN]
+        local[-1] = pieces[p, recorded_pieces.P_LEN]
         # nodes at most NODE_RAD of the piece's fastest rate (drive or homogeneous) apart
-        sigma, lam, root = pieces[p, k.P_SIGMA], pieces[p, k.P_LAM], pieces[p, k.P_ROOT]
+        sigma, lam, root = (
+            pieces[p, recorded_pieces.P_SIGMA],
+            pieces[p, recorded_pieces.P_LAM],
+            pieces[p, recorded_pieces.P_ROOT],
+        )
         natural = np.hypot(sigma, root) if lam < 0.0 else abs(sigma) + root
-        rate = max(pieces[p, k.P_W], natural)
+        rate = max(pieces[p, recorded_pieces.P_W], natural)
         assert rate > 0.0
-        assert h[p] * rate <= k.NODE_RAD * (1 + 1e-12)
+        assert h[p] * rate <= recorded_pieces.NODE_RAD * (1 + 1e-12)
         if count > 2:  # more than one cell: not needlessly fine either
-            assert h[p] * rate > 0.5 * k.NODE_RAD
-        times.append(pieces[p, k.P_T0] + local)
-        for r in range(k.TAB_WIDTH):
+            assert h[p] * rate > 0.5 * recorded_pieces.NODE_RAD
+        times.append(pieces[p, recorded_pieces.P_T0] + local)
+        for r in range(recorded_pieces.TAB_WIDTH):
             rows = tab[start[p] : start[p + 1], r]
             assert np.all(np.abs(rows) <= bnd[p, r] * (1 + 1e-12))
     t = np.concatenate(times)
@@ -96,8 +100,20 @@ def test_jerk_runs_keep_their_sign(monkeypatch: pytest.MonkeyPatch) -> None:
     marked = cells = 0
     for pieces, (start, h, tab, _bnd, run_end) in captured:
         for p in range(pieces.shape[0]):
-            rows = pieces[p, k.P_ROWS : k.P_ROWS + 30].reshape(6, 5).copy()
-            args = [pieces[p, c] for c in (k.P_SIGMA, k.P_LAM, k.P_ROOT, k.P_R1, k.P_W, k.P_PHI)]
+            rows = (
+                pieces[p, recorded_pieces.P_ROWS : recorded_pieces.P_ROWS + 30].reshape(6, 5).copy()
+            )
+            args = [
+                pieces[p, c]
+                for c in (
+                    recorded_pieces.P_SIGMA,
+                    recorded_pieces.P_LAM,
+                    recorded_pieces.P_ROOT,
+                    recorded_pieces.P_R1,
+                    recorded_pieces.P_W,
+                    recorded_pieces.P_PHI,
+                )
+            ]
             a, b = start[p], start[p + 1]
             assert np.all(run_end[b - 1 : b] == -1)  # the last node starts no cell
             for c in range(a, b - 1):
@@ -112,9 +128,9 @@ def test_jerk_runs_keep_their_sign(monkeypatch: pytest.MonkeyPatch) -> None:
                 assert e == (following if following >= 0 else c + 1)
                 sign = np.sign(tab[c, 3])
                 t0 = (c - a) * h[p]
-                t1 = pieces[p, k.P_LEN] if c + 1 == b - 1 else (c + 1 - a) * h[p]
+                t1 = pieces[p, recorded_pieces.P_LEN] if c + 1 == b - 1 else (c + 1 - a) * h[p]
                 for tau in np.linspace(t0, t1, 41):
-                    jerk = k._row(rows, 3, *k._basis(tau, *args))
+                    jerk = closed_form._row(rows, 3, *closed_form._basis(tau, *args))
                     assert np.sign(jerk) == sign, (p, c, tau, jerk)
                 assert np.all(np.sign(tab[c : e + 1, 3]) == sign)
     assert cells > 100
@@ -133,7 +149,7 @@ def test_jerk_sign_certificate_agrees_with_dense_sampling() -> None:
         coef = (amp, omega, rng.uniform(0, 2 * np.pi), 0.0, rng.uniform(-1.2, 1.2))
         h = rng.uniform(0.05, 1.0)
         values = _wave(coef, s * h, 0)
-        sure = k._jerk_keeps_its_sign(
+        sure = recorded_pieces._jerk_keeps_its_sign(
             float(values[0]), float(values[-1]), float(_wave(coef, 0.0, 1)),
             float(_wave(coef, h, 1)), amp * omega**2, h, 0.0, 0.0,
         )  # fmt: skip
@@ -159,7 +175,7 @@ def test_cell_classification_agrees_with_dense_sampling() -> None:
     """Random sinusoid-plus-line functions on a cell: NONE must have no sign change on a fine
     grid, ROOT exactly one; every outcome occurs."""
     rng = np.random.default_rng(5)
-    seen = {k.CELL_NONE: 0, k.CELL_ROOT: 0, k.CELL_UNSURE: 0}
+    seen = {search.CELL_NONE: 0, search.CELL_ROOT: 0, search.CELL_UNSURE: 0}
     s = np.linspace(0.0, 1.0, 4001)
     for _ in range(4000):
         amp, omega = rng.uniform(0.1, 1.0), rng.uniform(0.5, 6.0)
@@ -174,7 +190,7 @@ def test_cell_classification_agrees_with_dense_sampling() -> None:
             fa = 0.0
         elif fa <= 1e-12:
             continue  # only released functions start on (or below) their zero
-        code = k._cell(
+        code = search._cell(
             fa,
             fb,
             float(_wave(coef, 0.0, 1)),
@@ -190,9 +206,9 @@ def test_cell_classification_agrees_with_dense_sampling() -> None:
         seen[code] += 1
         values = _wave(coef, s * h, 0)[1:]  # (a, a + h]
         changes = np.count_nonzero(np.diff(np.sign(values)) != 0) + (values[0] <= 0.0)
-        if code == k.CELL_NONE:
+        if code == search.CELL_NONE:
             assert np.all(values > 0.0), (coef, h, released)
-        elif code == k.CELL_ROOT:
+        elif code == search.CELL_ROOT:
             assert changes == 1, (coef, h, released)
             assert values[-1] < 0.0, (coef, h, released)
     assert min(seen.values()) > 50, seen
@@ -209,10 +225,10 @@ def test_cell_passes_a_released_function_whose_slope_stays_positive() -> None:
     args += [float(_wave(coef, x, 2)) for x in (0.0, h)]
     B, B3 = 0.1 * 3.0**2, 0.1 * 3.0**3
     assert abs(args[4] + args[5]) < B3 * h  # neither convex nor concave on the cell
-    assert k._cell(*args, B, B3, h, 1e-14, 1e-10) == k.CELL_NONE
+    assert search._cell(*args, B, B3, h, 1e-14, 1e-10) == search.CELL_NONE
     assert np.all(_wave(coef, np.linspace(0.0, h, 1001)[1:], 0) > 0.0)
     # a slope that may turn negative inside the cell is still undecided
-    assert k._cell(*args, 4.0, B3, h, 1e-14, 1e-10) == k.CELL_UNSURE
+    assert search._cell(*args, 4.0, B3, h, 1e-14, 1e-10) == search.CELL_UNSURE
 
 
 def _expand_reference(
@@ -256,11 +272,13 @@ def test_shifted_basis_equals_the_direct_basis(sigma: float, lam: float) -> None
     for _ in range(200):
         tau = float(rng.uniform(0.0, 0.05))
         phi = float(rng.uniform(-np.pi, np.pi))
-        dt = float(rng.uniform(-1.0, 1.0)) * k.SHIFT_RAD / rate
-        here = k._basis(tau, sigma, lam, root, r1, w, phi)
-        shifted = k._shift_basis(dt, *k._shift_coefficients(sigma, lam), sigma, lam, w, *here)
-        direct = k._basis(tau + dt, sigma, lam, root, r1, w, phi)
-        bc, bs = k._basis_bounds(min(tau, tau + dt), sigma, lam, root, r1)
+        dt = float(rng.uniform(-1.0, 1.0)) * closed_form.SHIFT_RAD / rate
+        here = closed_form._basis(tau, sigma, lam, root, r1, w, phi)
+        shifted = closed_form._shift_basis(
+            dt, *closed_form._shift_coefficients(sigma, lam), sigma, lam, w, *here
+        )
+        direct = closed_form._basis(tau + dt, sigma, lam, root, r1, w, phi)
+        bc, bs = closed_form._basis_bounds(min(tau, tau + dt), sigma, lam, root, r1)
         for got, want, scale in zip(shifted, direct, (bc, bs, 1.0, 1.0), strict=True):
             assert abs(got - want) <= 1e-14 * scale, (tau, dt, got, want)
 
@@ -290,7 +308,7 @@ def _sorted_and_expected(
     """The kernel's events for a pass, and the reference: the earlier events, then the
     expansion of the groups' rows, sorted stably by time."""
     pre_t, pre_kind, pre_part, ev_t, ev_kind, ev_part, ev_n, before, exit_t = args
-    t, kind, part = k.group_events_in_time_order(*args)
+    t, kind, part = ordering.group_events_in_time_order(*args)
     assert (t.dtype, kind.dtype, part.dtype) == (np.float64, np.int8, np.int64)
     rt, rk, rp = _expand_reference(ev_t, ev_kind, ev_part, ev_n, before, exit_t)
     want_t = np.concatenate([pre_t, rt])
@@ -319,7 +337,7 @@ def test_group_events_go_to_the_members_present_in_stable_time_order(
     assert got == want
     assert len(want[0]) > 40 + 2 * G  # the earlier events and many of the groups'
     if G > 100:
-        assert len(got[0]) >= k.SORT_SERIAL_BELOW  # the bucket path ran
+        assert len(got[0]) >= ordering.SORT_SERIAL_BELOW  # the bucket path ran
 
 
 def test_group_events_with_a_non_finite_time_get_a_plain_stable_sort() -> None:
@@ -345,20 +363,20 @@ def test_group_events_with_a_non_finite_time_get_a_plain_stable_sort() -> None:
     ],
 )
 def test_stable_time_order_equals_a_stable_argsort(times: np.ndarray) -> None:
-    assert np.array_equal(k.stable_time_order(times), np.argsort(times, kind="stable"))
+    assert np.array_equal(ordering.stable_time_order(times), np.argsort(times, kind="stable"))
 
 
 def test_stable_time_order_falls_back_on_non_finite_times() -> None:
     times = np.array([3.0, np.nan, 1.0, np.inf, 1.0])
-    assert np.array_equal(k.stable_time_order(times), np.argsort(times, kind="stable"))
+    assert np.array_equal(ordering.stable_time_order(times), np.argsort(times, kind="stable"))
 
 
 def test_only_the_group_event_sort_starts_a_parallel_region() -> None:
     # a parallel region leaves the thread pool's workers spinning on the other cores for a while
     # (a whole second core for a live simulator ticking at 1 kHz): the sort of a run's few
     # chunks is serial; only the group march's events (many) are sorted in parallel
-    assert not k.stable_time_order.targetoptions.get("parallel")
-    assert k._fill_events_in_time_order.targetoptions.get("parallel")
+    assert not ordering.stable_time_order.targetoptions.get("parallel")
+    assert ordering._fill_events_in_time_order.targetoptions.get("parallel")
 
 
 def _shared_friction_parts() -> list[PartSpec]:
