@@ -5,6 +5,7 @@ No time step: between events the carrier's linear ODE is solved in closed form a
 certified root search that cannot step over a root; the only errors are floating-point round-off.
 
 - :mod:`.layout`: codes and array layouts shared by the kernels;
+- :mod:`.records`: the state records (named tuples of arrays) the steps share;
 - :mod:`.closed_form`: coefficient rows, the homogeneous basis, its bounds and exact shifts;
 - :mod:`.search`: the certified root search;
 - :mod:`.event_steps`: the event steps both loops share;

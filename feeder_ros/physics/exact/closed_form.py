@@ -25,6 +25,19 @@ from numba import njit
 from feeder_ros.physics.exact.layout import NROWS
 
 
+@njit(cache=True, inline="always")
+def _branch_constants(c, m, k):
+    """The homogeneous basis's constants of ``m*x'' + c*x' + k*x``: ``sigma = -c/(2m)``,
+    ``lambda = sigma^2 - k/m``, ``sqrt(|lambda|)`` and, over-damped, ``r1 = (k/m)/(sigma - g)``."""
+    sigma = -c / (2.0 * m)
+    lam = sigma * sigma - k / m
+    root = math.sqrt(abs(lam))
+    r1 = 0.0
+    if lam > 0.0:
+        r1 = (k / m) / (sigma - root)
+    return sigma, lam, root, r1
+
+
 @njit(cache=True)
 def _fill_rows(rows, sigma, lam, A, w, phi, m, c, k, F0, x0, v0, held):
     """Coefficient rows of x, x', ..., x^(5) (rows 0-5) and F, ..., F''' (rows 6-9); False at

@@ -1,7 +1,8 @@
-"""The event steps both loops (:mod:`.global_loop`, :mod:`.group_march`) share: the carrier's
-mode on the switching surface, the event log, a group's lead part and its exit, the end-of-piece
-group update, a group's stick and slip event functions, the phase a group takes at its own
-event, and the stuck counter.
+"""The event steps of the loops (:mod:`.global_loop`, :mod:`.group_march`): the carrier's mode
+on the switching surface and its state after its own event, the event log, a group's lead part
+and its exit, the end-of-piece group update, the event functions (the carrier's, a sticking or
+slipping group's, the shared stick limits), the phase a group takes at its own event, the merge
+of groups that stick with the same friction, and the stuck counter.
 """
 
 # mypy: disable-error-code="misc, no-untyped-def"
@@ -11,8 +12,14 @@ import numpy as np
 from numba import njit
 
 from feeder_ros.physics.exact.layout import (
+    EV_BRANCH,
+    EV_SLIDE_END,
+    EV_SLIDE_START,
+    F_BRANCH,
     F_EXIT,
     F_RELVEL,
+    F_SLIDE_BWD,
+    F_SLIDE_FWD,
     F_STICK_DOWN,
     F_STICK_UP,
     SLIP_BACKWARD,
@@ -208,3 +215,121 @@ def _count_repeat(zero_count, repeated, kind):
         zero_count += 1
         return zero_count, zero_count > STUCK_REPEATS
     return 0, False
+
+
+@njit(cache=True, inline="always")
+def _carrier_event(kind, switch, mode, x, v, F, dF, F0, m, kf, kb):
+    """The carrier's state ``x``, ``v`` and mode after its own event of kind ``kind``, and the
+    event to log (``EV_*``, -1 for none). At a stiffness branch (F_BRANCH) the switching variable
+    is exactly zero and the new mode follows the branch's sign, or the Filippov sliding mode (0)
+    when neither branch moves away (:func:`_classify`); at the end of a sliding hold (F_SLIDE_FWD,
+    F_SLIDE_BWD) the carrier leaves on the branch named by the event, at rest."""
+    if kind == F_BRANCH:
+        if switch == 0:
+            new_mode = -mode
+            if v == 0.0:
+                new_mode = _classify(0, mode, 0.0, 0.0, F, dF, F0, m, kf, kb)
+            x = 0.0
+        else:
+            new_mode = _classify(1, mode, x, 0.0, F, dF, F0, m, kf, kb)
+            v = 0.0
+        if new_mode == mode:
+            return x, v, new_mode, -1
+        return x, v, new_mode, EV_SLIDE_START if new_mode == 0.0 else EV_BRANCH
+    return x, 0.0, 1.0 if kind == F_SLIDE_FWD else -1.0, EV_SLIDE_END
+
+
+@njit(cache=True, inline="always")
+def _carrier_functions(held, switch, mode, F0, kf, kb, x0, fn):
+    """The carrier's event functions at the first slots of a new piece; returns their count. On
+    a branch: the switching variable (row ``switch``: x or v) times the mode (F_BRANCH). Held in
+    the sliding mode (velocity switching): the sliding bounds ``-(F + F0 - kf*x0)`` (F_SLIDE_FWD)
+    and ``F + F0 - kb*x0`` (F_SLIDE_BWD), on the drive force (row 6)."""
+    if not held:
+        _set_function(0, F_BRANCH, switch, mode, 0.0, fn)
+        return 1
+    _set_function(0, F_SLIDE_FWD, 6, -1.0, -(F0 - kf * x0), fn)
+    _set_function(1, F_SLIDE_BWD, 6, 1.0, F0 - kb * x0, fn)
+    return 2
+
+
+@njit(cache=True, inline="always")
+def _set_function(i, kind, row, sgn, c0, fn):
+    """Event function ``i`` of the table ``fn``: ``sgn*row(tau) + c0`` of kind ``kind``."""
+    f_kind, _f_group, f_row, f_sgn, f_c0, f_c1, f_c2, _f_skip, _f_zero, _f_eval = fn
+    f_kind[i] = kind
+    f_row[i] = row
+    f_sgn[i] = sgn
+    f_c0[i] = c0
+    f_c1[i] = 0.0
+    f_c2[i] = 0.0
+
+
+@njit(cache=True, inline="always")
+def _group_functions(nf, vs, xs, track, gr, fn):
+    """The groups' event functions from slot ``nf`` of ``fn`` on, for the global loop's piece (or
+    sub-piece after a part event) starting with the carrier at ``xs``, ``vs``; returns the new
+    count and the smallest stick limit ``L`` of the sticking groups (inf if none). A sticking
+    group takes the carrier's velocity and, once its lead part is at the track end, an exit
+    function that is zero at once; a slipping group has its relative velocity and exit
+    (:func:`_slip_functions`); the sticking groups share the stick limits of the smallest ``L``
+    (:func:`_stick_functions`)."""
+    g_L, g_D, _g_mass, g_u, g_y, _g_slip, g_lead, g_phase, g_head = gr
+    f_kind, f_group, f_row, f_sgn, f_c0, f_c1, f_c2, _f_skip, _f_zero, _f_eval = fn
+    lmin = np.inf
+    for g in range(g_L.shape[0]):
+        if g_head[g] < 0:
+            continue
+        if g_phase[g] == STICK:
+            g_u[g] = vs
+            if g_L[g] < lmin:
+                lmin = g_L[g]
+            if g_lead[g] + g_y[g] >= track:
+                _set_function(nf, F_EXIT, 0, 0.0, track - g_lead[g] - g_y[g], fn)
+                f_group[nf] = g
+                nf += 1
+        else:
+            _slip_functions(
+                nf, g, track, xs, g_phase, g_D, g_u, g_y, g_lead, f_kind, f_row, f_sgn,
+                f_c0, f_c1, f_c2,
+            )  # fmt: skip
+            f_group[nf] = g
+            f_group[nf + 1] = g
+            nf += 2
+    if lmin < np.inf:
+        _stick_functions(nf, lmin, f_kind, f_row, f_sgn, f_c0, f_c1, f_c2)
+        nf += 2
+    return nf, lmin
+
+
+@njit(cache=True)
+def _merge_into_sticking_group(
+    g, g_head, g_phase, g_L, g_D, g_y, g_slip, g_mass, g_lead, m_group, m_next, m_o, m_slip0
+):  # fmt: skip
+    """Group ``g`` has just stuck: it joins another sticking group of the same friction (their
+    futures are identical), if there is one. Its members move to that group's list with their
+    offsets and slip totals rebased on it; the mass and lead part are combined and ``g`` is
+    emptied (``g_head[g] = -1``)."""
+    for h2 in range(g_L.shape[0]):
+        if (
+            h2 != g
+            and g_head[h2] >= 0
+            and g_phase[h2] == STICK
+            and g_L[h2] == g_L[g]
+            and g_D[h2] == g_D[g]
+        ):
+            shift = g_y[g] - g_y[h2]
+            i = g_head[g]
+            tail = -1
+            while i >= 0:
+                m_o[i] += shift
+                m_group[i] = h2
+                m_slip0[i] = g_slip[h2] - (g_slip[g] - m_slip0[i])
+                tail = i
+                i = m_next[i]
+            m_next[tail] = g_head[h2]
+            g_head[h2] = g_head[g]
+            g_head[g] = -1
+            g_mass[h2] += g_mass[g]
+            g_lead[h2] = max(g_lead[h2], g_lead[g] + shift)
+            return

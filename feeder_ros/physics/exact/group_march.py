@@ -14,6 +14,11 @@ is concave or convex there) on a few table values, any group passes the other ce
 on their end values (:func:`_cell`), solves a cell holding one root by a bracketed Halley
 iteration on the closed form, halves undecided cells with exact evaluations, and falls back to the
 safe steps above only when halving does not decide.
+
+This file is over 800 lines because :func:`_march_group` is still one kernel of about 640 lines
+(issue 30 cuts it next, as :mod:`.global_loop` was: into inlined steps over the records of
+:mod:`.records`, compiled without numba's reference counting, checked bit for bit against the
+golden outputs and timed against the old kernel in the same run).
 """
 
 # mypy: disable-error-code="misc, no-untyped-def"

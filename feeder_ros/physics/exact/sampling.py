@@ -15,7 +15,8 @@ import math
 import numpy as np
 from numba import njit
 
-from feeder_ros.physics.exact.layout import EXITED, SLIP_BACKWARD, STICK
+from feeder_ros.physics.exact.closed_form import _basis, _row
+from feeder_ros.physics.exact.layout import EXITED, N_ROT, SLIP_BACKWARD, STICK
 
 
 @njit(cache=True)
@@ -125,3 +126,90 @@ def _part_samples(
                 out_px[i, j] = o + (y + sk * (u + 0.5 * ap * sk) - (xk - xs)) + xk
                 out_pv[i, j] = u + ap * sk
                 out_pp[i, j] = ph
+
+
+@njit(cache=True, inline="always")
+def _piece_samples(
+    samples, counters, t0, ts, xs, t_stop, last, t_end, h_nom, base, piece, rows, held, mode,
+    table, carrier_out, part_state, parts_out,
+):  # fmt: skip
+    """The samples ``samples[counters[0]:]`` before ``t_stop`` (up to ``t_end`` included when the
+    piece is the run's last) of the piece that started at ``t0`` (the parts' polynomials start at
+    its local time ``ts``, carrier at ``xs``). Samples on the nominal grid ``h_nom`` are shifted
+    by the tabulated shifts ``j*h_nom`` (``table``, per branch, filled on demand) from the last
+    directly evaluated one, ``base`` = (its local time, shifts since, its basis ``C, S, sin,
+    cos``); the others are evaluated directly. Returns the new ``base``; ``counters[0]`` counts
+    the samples written."""
+    sigma, lam, root, r1, w, phi = piece
+    tb, jb, cb, sb, snb, csb = base
+    rot_key, rot, rot_n = table.key, table.rot, table.n
+    out_cx, out_cv, out_ca, out_cb = carrier_out
+    g_phase, g_u, g_y, g_D, m_group, m_o = part_state
+    out_px, out_pv, out_pp = parts_out
+    n_samples = samples.shape[0]
+    ns = counters[0]
+    can_rot = h_nom > 0.0 and ns + 1 < n_samples and samples[ns + 1] <= t_stop
+    slot = 0 if mode >= 0.0 else 1
+    if can_rot and (rot_key[slot, 0] != sigma or rot_key[slot, 1] != lam or rot_key[slot, 2] != w):
+        # the shifts by j*h_nom of this basis, filled on demand (cached per branch: the
+        # pieces alternate between two parameter sets)
+        rot_key[slot, 0] = sigma
+        rot_key[slot, 1] = lam
+        rot_key[slot, 2] = w
+        rot_n[slot] = 1
+    # the first-order correction below is exact to round-off for |dt|*omega <= 1e-8
+    eps_rec = 1e-8 / (abs(sigma) + root + w + 1e-300)
+    while ns < n_samples and (samples[ns] < t_stop or (last and samples[ns] <= t_end)):
+        # a block of samples shifted from the last directly evaluated one (exact shift
+        # identities C(t+h) = C(h)C + lam*S(h)S, S(t+h) = S(h)C + C(h)S, the drive's angle
+        # addition, and a first-order Taylor term for the round-off difference dt between a
+        # sample and tb + j*h_nom), or else one sample evaluated directly
+        nb = 0
+        if can_rot and jb + 1 < N_ROT:
+            cap_b = N_ROT - 1 - jb
+            while nb < cap_b and ns + nb < n_samples:
+                tq = samples[ns + nb]
+                if not (tq < t_stop or (last and tq <= t_end)):
+                    break
+                if not abs((tq - t0) - (tb + (jb + 1 + nb) * h_nom)) <= eps_rec:
+                    break
+                nb += 1
+            if jb + nb >= rot_n[slot]:
+                # the shifts by j*h_nom of this basis, filled on demand
+                for jr in range(rot_n[slot], jb + nb + 1):
+                    rc, rs, rsw, rcw = _basis(jr * h_nom, sigma, lam, root, r1, w, 0.0)
+                    rot[slot, 0, jr] = rc
+                    rot[slot, 1, jr] = rs
+                    rot[slot, 2, jr] = rsw
+                    rot[slot, 3, jr] = rcw
+                rot_n[slot] = jb + nb + 1
+        if nb > 0:
+            _shifted_samples(
+                samples, ns, nb, jb, t0, tb, h_nom, rot[slot], cb, sb, snb, csb, sigma, lam,
+                w, rows, held, mode, out_cx, out_cv, out_ca, out_cb,
+            )  # fmt: skip
+            if m_group.shape[0] > 0:
+                _part_samples(
+                    samples, ns, nb, t0, ts, xs, out_cx, out_cv, g_phase, g_u, g_y, g_D,
+                    m_group, m_o, out_px, out_pv, out_pp,
+                )  # fmt: skip
+            jb += nb
+            ns += nb
+            continue
+        tk = samples[ns] - t0
+        cb, sb, snb, csb = _basis(tk, sigma, lam, root, r1, w, phi)
+        tb = tk
+        jb = 0
+        xk = _row(rows, 0, cb, sb, snb, csb)
+        out_cx[ns] = xk
+        out_cv[ns] = 0.0 if held else _row(rows, 1, cb, sb, snb, csb)
+        out_ca[ns] = 0.0 if held else _row(rows, 2, cb, sb, snb, csb)
+        out_cb[ns] = int(mode)
+        if m_group.shape[0] > 0:
+            _part_samples(
+                samples, ns, 1, t0, ts, xs, out_cx, out_cv, g_phase, g_u, g_y, g_D, m_group,
+                m_o, out_px, out_pv, out_pp,
+            )  # fmt: skip
+        ns += 1
+    counters[0] = ns
+    return tb, jb, cb, sb, snb, csb
