@@ -39,9 +39,10 @@ def _branch_constants(c, m, k):
 
 
 @njit(cache=True)
-def _fill_rows(rows, sigma, lam, A, w, phi, m, c, k, F0, x0, v0, held):
-    """Coefficient rows of x, x', ..., x^(5) (rows 0-5) and F, ..., F''' (rows 6-9); False at
-    resonance."""
+def _fill_rows(rows, piece, A, m, c, k, F0, x0, v0, held):
+    """Coefficient rows of x, x', ..., x^(5) (rows 0-5) and F, ..., F''' (rows 6-9) of the piece
+    with basis constants ``piece = (sigma, lam, root, r1, w, phi)``; False at resonance."""
+    sigma, lam, _root, _r1, w, phi = piece
     for r in range(NROWS):
         for j in range(5):
             rows[r, j] = 0.0
@@ -301,3 +302,25 @@ def _row_bound(rows, r, bc, bs):
         + math.sqrt(rows[r, 2] * rows[r, 2] + rows[r, 3] * rows[r, 3])
         + abs(rows[r, 4])
     )
+
+
+@njit(cache=True, inline="always")
+def _branch_of_piece(c, m, k, w, phi):
+    """A piece's closed-form constants on the stiffness branch ``k`` (mass ``m``, damping ``c``,
+    drive rate ``w`` and phase ``phi`` at its start): the basis constants ``(sigma, lam, root,
+    r1, w, phi)``, the coefficients of :func:`_shift_basis` and the longest shift it allows."""
+    sigma, lam, root, r1 = _branch_constants(c, m, k)
+    shift = _shift_coefficients(sigma, lam)
+    return (sigma, lam, root, r1, w, phi), shift, _shift_max(sigma, root, w)
+
+
+@njit(cache=True, inline="always")
+def _basis_at(ts, piece):
+    """The basis values and bounds (:func:`_basis_all`) at the local time ``ts`` of the piece with
+    basis constants ``piece``; at its start from the drive phase alone."""
+    sigma, lam, root, r1, w, phi = piece
+    if ts == 0.0:
+        sn, cs = _sincos(phi)
+        bc, bs = _basis_bounds(0.0, sigma, lam, root, r1)
+        return 1.0, 0.0, sn, cs, bc, bs
+    return _basis_all(ts, sigma, lam, root, r1, w, phi)

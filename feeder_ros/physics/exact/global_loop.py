@@ -20,15 +20,12 @@ from feeder_ros.physics.exact.closed_form import (
     SHIFT_CHAIN,
     _basis,
     _basis_all,
-    _basis_bounds,
-    _branch_constants,
+    _basis_at,
+    _branch_of_piece,
     _fill_rows,
     _row,
     _row_bound,
     _shift_basis,
-    _shift_coefficients,
-    _shift_max,
-    _sincos,
 )
 from feeder_ros.physics.exact.event_steps import (
     _carrier_event,
@@ -62,7 +59,6 @@ from feeder_ros.physics.exact.layout import (
     M_BASE,
     M_ONEWAY,
     N_ROT,
-    NROWS,
     S_MODE,
     S_SEG,
     S_T,
@@ -78,7 +74,7 @@ from feeder_ros.physics.exact.layout import (
     TRACK,
 )
 from feeder_ros.physics.exact.recorded_pieces import _record_piece
-from feeder_ros.physics.exact.records import BoundRows, Functions, Groups, Members, ShiftTable
+from feeder_ros.physics.exact.records import Groups, Members, ShiftTable
 from feeder_ros.physics.exact.sampling import _piece_samples
 from feeder_ros.physics.exact.search import (
     REL_FREE,
@@ -90,6 +86,7 @@ from feeder_ros.physics.exact.search import (
     _clearly_free,
     _release,
     _safe_step,
+    search_scratch,
 )
 
 
@@ -110,7 +107,7 @@ def advance(
     0 done, 1 event buffer full (state saved at the event time; call again with room), 2 exact
     resonance of an undamped branch, 3 stuck (an event repeated at one instant without progress).
     """
-    rows, fn, bound_rows, der = _search_scratch(4 + 2 * g_L.shape[0])
+    rows, fn, bound_rows, der = search_scratch(4 + 2 * g_L.shape[0])
     shift_table = ShiftTable(np.full((2, 3), np.nan), np.zeros((2, 4, N_ROT)), np.ones(2, np.int64))
     return _event_loop(
         model, d_start, d_omega, d_amp, d_phase, d_logged, state, g_L, g_D, g_mass, g_u, g_y,
@@ -156,7 +153,6 @@ def _event_loop(
     members = Members(m_group, m_next, m_o, m_mass, m_slip0, m_exit_t)
     log_buffer = (ev_t, ev_kind, ev_part, counters)
     drive = (d_start, d_omega, d_amp, d_phase, d_logged)
-    part_state = (g_phase, g_u, g_y, g_D, m_group, m_o)
     parts_out = (out_px, out_pv, out_pp)
 
     record = pieces.shape[0] > 0
@@ -170,7 +166,7 @@ def _event_loop(
     base = (0.0, N_ROT, 1.0, 0.0, 0.0, 1.0)
     # the piece's values, set at its start (typed here for numba)
     n_cf = seg = 0
-    t0 = x0 = v0 = w = A = phi = piece_end = T = F0 = k = sigma = lam = root = r1 = 0.0
+    t0 = A = piece_end = T = F0 = k = 0.0
     mode = m = 1.0
     drive_end = held = False
     piece = (0.0, 0.0, 0.0, 0.0, 0.0, 0.0)  # sigma, lam, root, r1, w, phi
@@ -190,8 +186,8 @@ def _event_loop(
             return STATUS_BUFFER_FULL
         if not cont:
             ts = 0.0
-            x0 = state[S_X]
-            v0 = state[S_V]
+            xs = state[S_X]
+            vs = state[S_V]
             mode = state[S_MODE]
             held = mode == 0.0
             seg, w, A, phi, piece_end, drive_end = _drive_segment(
@@ -200,35 +196,26 @@ def _event_loop(
             T = piece_end - t0
             m, F0 = _carrier_load(model, two_way, groups)
             k = kf if mode >= 0.0 else kb
-            sigma, lam, root, r1 = _branch_constants(c, m, k)
-            piece = (sigma, lam, root, r1, w, phi)
-            shift = _shift_coefficients(sigma, lam)
-            shift_max = _shift_max(sigma, root, w)
-            if not _fill_rows(rows, sigma, lam, A, w, phi, m, c, k, F0, x0, v0, held):
+            piece, shift, shift_max = _branch_of_piece(c, m, k, w, phi)
+            if not _fill_rows(rows, piece, A, m, c, k, F0, xs, vs, held):
                 counters[2] = STATUS_RESONANCE
                 return STATUS_RESONANCE
-            xs = x0
-            vs = v0
 
         # ---- event functions of this piece
         # (the carrier's functions keep their state when the piece continues after a part event)
         if not cont:
-            n_cf = _carrier_functions(held, switch, mode, F0, kf, kb, x0, fn)
+            n_cf = _carrier_functions(held, switch, mode, F0, kf, kb, xs, fn)
         nf, lmin = _group_functions(n_cf, vs, xs, track, groups, fn)
 
         # ---- release functions that start on (or across) their zero (at ts; the part's
         # polynomials are in s = tau - ts)
         chain = 0
-        if ts == 0.0:
-            sn, cs = _sincos(phi)
-            bc, bs = _basis_bounds(0.0, sigma, lam, root, r1)
-            basis = (1.0, 0.0, sn, cs, bc, bs)
-        elif cont:
+        if ts == 0.0 or not cont:
+            basis = _basis_at(ts, piece)
+        else:
             # after a part event: the basis at the event (the stop that found it)
             basis = e_basis
             chain = e_chain
-        else:
-            basis = _basis_all(ts, sigma, lam, root, r1, w, phi)
         hit = _release_global(rows, fn, n_cf if cont else 0, nf, ts, T, basis, lmin, der)
         tau_e = ts if hit >= 0 else T
         e_basis = basis
@@ -244,7 +231,7 @@ def _event_loop(
         base = _piece_samples(
             samples, counters, t0, ts, xs, t0 + tau_e, hit < 0 and not drive_end, t_end, h_nom,
             base if cont else (0.0, N_ROT, 1.0, 0.0, 0.0, 1.0), piece, rows, held, mode,
-            shift_table, carrier_out, part_state, parts_out,
+            shift_table, carrier_out, groups, members, parts_out,
         )  # fmt: skip
 
         # ---- state at the end of the piece
@@ -536,22 +523,6 @@ def _part_event(kind, g, te, carrier, coupled, lmin, gr, mb, log, log_events):
         )  # fmt: skip
         if log_events:
             _log(ev_t, ev_kind, ev_part, counters, te, EV_EXIT, lead_i)
-
-
-@njit(cache=True)
-def _search_scratch(nfmax):
-    """The global loop's coefficient rows, event-function table for ``nfmax`` functions, its
-    search's bound rows and the release's derivative scratch, all zero."""
-    fn = Functions(
-        np.zeros(nfmax, np.int64), np.zeros(nfmax, np.int64), np.zeros(nfmax, np.int64),
-        np.zeros(nfmax), np.zeros(nfmax), np.zeros(nfmax), np.zeros(nfmax), np.zeros(nfmax),
-        np.zeros(nfmax, np.bool_), np.zeros(nfmax, np.bool_),
-    )  # fmt: skip
-    rows = BoundRows(
-        np.zeros(NROWS), np.zeros(NROWS), np.zeros(NROWS), np.zeros(NROWS), np.zeros(NROWS),
-        np.zeros(NROWS), np.zeros(NROWS),
-    )  # fmt: skip
-    return np.zeros((NROWS, 5)), fn, rows, np.zeros(5)
 
 
 @njit(cache=True, inline="always")

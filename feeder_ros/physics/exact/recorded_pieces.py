@@ -107,6 +107,20 @@ def _jerk_keeps_its_sign(ya, yb, da, db, B5, h, tol3, tol4):
     return da * db > 0.0 and abs(da + db) > B5 * h + 2.0 * tol4
 
 
+@njit(cache=True, inline="always")
+def _read_piece(pieces, k, rows):
+    """Recorded piece ``k``: its start time, length, basis constants ``(sigma, lam, root, r1, w,
+    phi)`` and whether the carrier is held; its coefficient rows are copied to ``rows``."""
+    for r in range(6):
+        for j in range(5):
+            rows[r, j] = pieces[k, P_ROWS + 5 * r + j]
+    piece = (
+        pieces[k, P_SIGMA], pieces[k, P_LAM], pieces[k, P_ROOT], pieces[k, P_R1], pieces[k, P_W],
+        pieces[k, P_PHI],
+    )  # fmt: skip
+    return pieces[k, P_T0], pieces[k, P_LEN], piece, pieces[k, P_MODE] == 0.0
+
+
 @njit(cache=True)
 def piece_tables(pieces, n_pieces):
     """Node tables of the recorded pieces, shared by all groups: ``(node_start, node_h, tab,
@@ -130,15 +144,8 @@ def piece_tables(pieces, n_pieces):
     bnd = np.zeros((n_pieces, BND_WIDTH))
     for k in range(n_pieces):  # serial: a pass has few pieces, each costs microseconds
         rows = np.zeros((6, 5))
-        for r in range(6):
-            for j in range(5):
-                rows[r, j] = pieces[k, P_ROWS + 5 * r + j]
-        sigma = pieces[k, P_SIGMA]
-        lam = pieces[k, P_LAM]
-        root = pieces[k, P_ROOT]
-        r1 = pieces[k, P_R1]
-        w = pieces[k, P_W]
-        phi = pieces[k, P_PHI]
+        _t0, _T, piece, _held = _read_piece(pieces, k, rows)
+        sigma, lam, root, r1, w, phi = piece
         bc, bs = _basis_bounds(0.0, sigma, lam, root, r1)
         for r in range(6):
             bnd[k, r] = _row_bound(rows, r, bc, bs)

@@ -2,9 +2,9 @@
 compiles attribute access to a plain field read, so a record costs nothing over its arrays).
 
 The kernels' public entry points (:func:`~feeder_ros.physics.exact.global_loop.advance`,
-:func:`~feeder_ros.physics.exact.group_march.advance_groups`) still take their arrays one by one:
-the callers in :mod:`feeder_ros.physics.live_simulator` own them as named arrays, and numba's
-cached signatures stay those of plain arrays.
+:func:`~feeder_ros.physics.exact.group_march.advance_groups`) take their arrays one by one (the
+callers in :mod:`feeder_ros.physics.live_simulator` own them as named arrays) and bundle them into
+records for the loops they call.
 """
 
 from __future__ import annotations
@@ -25,13 +25,13 @@ its mass, its slip total when it joined the group (``slip0``) and its exit time.
 Functions = namedtuple(
     "Functions", ["kind", "group", "row", "sgn", "c0", "c1", "c2", "skip", "zero", "evaluated"]
 )
-Functions.__doc__ = """The global loop's event functions ``sgn*row(tau) + c0 + c1*s + c2*s^2``
+Functions.__doc__ = """A loop's event functions ``sgn*row(tau) + c0 + c1*s + c2*s^2``
 (``s`` the time since the sub-piece's start ``ts``), one slot each: their ``F_*`` kind, group
 (part events), coefficients, and the search's state: ``skip`` (provably positive before this
 time), ``zero`` (no root on this piece) and ``evaluated`` (stepped at the current stop)."""
 
 BoundRows = namedtuple("BoundRows", ["vals", "bnds", "hbnds", "abs_a", "abs_b", "amp", "R"])
-BoundRows.__doc__ = """Scratch rows of the global search: each row's value at the current stop,
+BoundRows.__doc__ = """Scratch rows of the certified search: each row's value at the current stop,
 its bound (``bnds``) and its homogeneous terms' bound (``hbnds``) over the rest of the piece, and
 the per-row bound terms of :func:`~feeder_ros.physics.exact.search._bound_terms`."""
 

@@ -95,12 +95,14 @@ def _shifted_samples(
 
 
 @njit(cache=True, inline="always")
-def _part_samples(
-    samples, ns, nb, t0, ts, xs, out_cx, out_cv, g_phase, g_u, g_y, g_D, m_group, m_o, out_px,
-    out_pv, out_pp,
-):  # fmt: skip
+def _part_samples(samples, ns, nb, start, out_cx, out_cv, gr, mb, parts_out):
     """The parts at samples ``ns .. ns+nb-1`` (carrier already written there): a sticking group
-    moves with the carrier, a slipping one with its constant acceleration ``-+D`` since ``ts``."""
+    moves with the carrier, a slipping one with its constant acceleration ``-+D`` since ``ts``
+    (``start = (t0, ts, xs)``: the piece's start, the sub-piece's, the carrier there)."""
+    t0, ts, xs = start
+    _g_L, g_D, _g_mass, g_u, g_y, _g_slip, _g_lead, g_phase, _g_head = gr
+    m_group, _m_next, m_o, _m_mass, _m_slip0, _m_exit_t = mb
+    out_px, out_pv, out_pp = parts_out
     for j in range(m_group.shape[0]):
         g = m_group[j]
         if g < 0:
@@ -131,21 +133,20 @@ def _part_samples(
 @njit(cache=True, inline="always")
 def _piece_samples(
     samples, counters, t0, ts, xs, t_stop, last, t_end, h_nom, base, piece, rows, held, mode,
-    table, carrier_out, part_state, parts_out,
+    table, carrier_out, gr, mb, parts_out,
 ):  # fmt: skip
     """The samples ``samples[counters[0]:]`` before ``t_stop`` (up to ``t_end`` included when the
     piece is the run's last) of the piece that started at ``t0`` (the parts' polynomials start at
     its local time ``ts``, carrier at ``xs``). Samples on the nominal grid ``h_nom`` are shifted
     by the tabulated shifts ``j*h_nom`` (``table``, per branch, filled on demand) from the last
     directly evaluated one, ``base`` = (its local time, shifts since, its basis ``C, S, sin,
-    cos``); the others are evaluated directly. Returns the new ``base``; ``counters[0]`` counts
-    the samples written."""
+    cos``); the others are evaluated directly, the parts (groups ``gr``, members ``mb``) with
+    them. Returns the new ``base``; ``counters[0]`` counts the samples written."""
     sigma, lam, root, r1, w, phi = piece
     tb, jb, cb, sb, snb, csb = base
     rot_key, rot, rot_n = table.key, table.rot, table.n
     out_cx, out_cv, out_ca, out_cb = carrier_out
-    g_phase, g_u, g_y, g_D, m_group, m_o = part_state
-    out_px, out_pv, out_pp = parts_out
+    m_group = mb.group
     n_samples = samples.shape[0]
     ns = counters[0]
     can_rot = h_nom > 0.0 and ns + 1 < n_samples and samples[ns + 1] <= t_stop
@@ -189,10 +190,7 @@ def _piece_samples(
                 w, rows, held, mode, out_cx, out_cv, out_ca, out_cb,
             )  # fmt: skip
             if m_group.shape[0] > 0:
-                _part_samples(
-                    samples, ns, nb, t0, ts, xs, out_cx, out_cv, g_phase, g_u, g_y, g_D,
-                    m_group, m_o, out_px, out_pv, out_pp,
-                )  # fmt: skip
+                _part_samples(samples, ns, nb, (t0, ts, xs), out_cx, out_cv, gr, mb, parts_out)
             jb += nb
             ns += nb
             continue
@@ -206,10 +204,7 @@ def _piece_samples(
         out_ca[ns] = 0.0 if held else _row(rows, 2, cb, sb, snb, csb)
         out_cb[ns] = int(mode)
         if m_group.shape[0] > 0:
-            _part_samples(
-                samples, ns, 1, t0, ts, xs, out_cx, out_cv, g_phase, g_u, g_y, g_D, m_group,
-                m_o, out_px, out_pv, out_pp,
-            )  # fmt: skip
+            _part_samples(samples, ns, 1, (t0, ts, xs), out_cx, out_cv, gr, mb, parts_out)
         ns += 1
     counters[0] = ns
     return tb, jb, cb, sb, snb, csb

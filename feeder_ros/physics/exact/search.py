@@ -23,7 +23,8 @@ import numpy as np
 from numba import njit
 
 from feeder_ros.physics.exact.closed_form import _row, _row_bound
-from feeder_ros.physics.exact.layout import EPS
+from feeder_ros.physics.exact.layout import EPS, NROWS
+from feeder_ros.physics.exact.records import BoundRows, Functions
 
 
 @njit(cache=True, inline="always")
@@ -218,3 +219,19 @@ def _certified_step(f, s, sg, c0, c1, c2, r, vals, bnds, h_cap):
     B = abs(sg) * bnds[r + 2] + 2.0 * abs(c2)
     f2 = sg * vals[r + 2] + 2.0 * c2
     return _step(f, d, B, f2, abs(sg) * bnds[r + 3], h_cap), d
+
+
+@njit(cache=True)
+def search_scratch(nfmax):
+    """A loop's coefficient rows, event-function table for ``nfmax`` functions, its
+    search's bound rows and the release's derivative scratch, all zero."""
+    fn = Functions(
+        np.zeros(nfmax, np.int64), np.zeros(nfmax, np.int64), np.zeros(nfmax, np.int64),
+        np.zeros(nfmax), np.zeros(nfmax), np.zeros(nfmax), np.zeros(nfmax), np.zeros(nfmax),
+        np.zeros(nfmax, np.bool_), np.zeros(nfmax, np.bool_),
+    )  # fmt: skip
+    rows = BoundRows(
+        np.zeros(NROWS), np.zeros(NROWS), np.zeros(NROWS), np.zeros(NROWS), np.zeros(NROWS),
+        np.zeros(NROWS), np.zeros(NROWS),
+    )  # fmt: skip
+    return np.zeros((NROWS, 5)), fn, rows, np.zeros(5)
