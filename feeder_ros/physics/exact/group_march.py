@@ -143,6 +143,7 @@ def _march_group(g, recorded, track, t_end, gr, mb, outputs, events, scratch):
             if ev_n[g] + 2 > cap:
                 return STATUS_BUFFER_FULL
             if ts == 0.0:
+                # closed_form._basis_at(0.0, piece), stored once per piece by piece_tables
                 basis = (
                     1.0, 0.0, bnd[k, BND_SIN_PHI], bnd[k, BND_COS_PHI], bnd[k, BND_BC0],
                     bnd[k, BND_BS0],
