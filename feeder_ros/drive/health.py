@@ -6,18 +6,20 @@ not connected, a backend warning, a lost heartbeat (WARN); otherwise the state (
 pause reason while level control holds feeding. Conditions that only degrade a running drive add
 a WARN to an OK drive, appended to the summary: inactive, amplitude regulation not holding its
 set point, resonance tracking holding on stale feedback or with its amplitude at the limit.
+:func:`drive_values` is the drive's part of the status's key values.
 """
 
 from __future__ import annotations
 
 import enum
+import math
 from dataclasses import dataclass
 
-from feeder_ros.drive.backend import BackendStatus
+from feeder_ros.drive.backend import BackendStatus, DriveOutput
 from feeder_ros.drive.controller import DriveController, DriveState
 from feeder_ros.drive.resonance_tracker import TrackerMode, TrackerStatus
 
-__all__ = ["Health", "Level", "drive_health"]
+__all__ = ["Health", "Level", "drive_health", "drive_values"]
 
 
 class Level(enum.IntEnum):
@@ -78,3 +80,34 @@ def drive_health(
             "resonance tracking: amplitude at its limit",
         )
     return health
+
+
+def drive_values(
+    controller: DriveController, backend: BackendStatus, output: DriveOutput, now_s: float
+) -> dict[str, str]:
+    """The key values of the drive's diagnostic status: its state, the output and set point, the
+    heartbeat, the latched fault and the backend (with the controller's actual values when the
+    backend reads them back)."""
+    age = controller.watchdog.age_s(now_s)
+    values = {
+        "state": controller.state.name.lower(),
+        "active": str(controller.active),
+        "output enabled": str(output.enabled),
+        "frequency_hz": f"{output.frequency_hz:.3f}",
+        "amplitude_percent": f"{output.amplitude_percent:.3f}",
+        "amplitude_n": f"{output.amplitude_n:.3f}",
+        "target_frequency_hz": f"{controller.set_point.frequency_hz:.3f}",
+        "target_amplitude_percent": f"{controller.set_point.amplitude_percent:.3f}",
+        "heartbeat age s": "never" if math.isinf(age) else f"{age:.3f}",
+        "heartbeat timeout s": f"{controller.watchdog.timeout_s:g}",
+        "fault_reason": controller.fault_reason,
+        "backend connected": str(backend.connected),
+        "backend fault": backend.fault,
+        "backend warning": backend.warning,
+        **backend.details,
+    }
+    if backend.actual_frequency_hz is not None:
+        values["controller actual_frequency_hz"] = f"{backend.actual_frequency_hz:.3f}"
+    if backend.actual_amplitude_percent is not None:
+        values["controller actual_amplitude_percent"] = f"{backend.actual_amplitude_percent:.3f}"
+    return values

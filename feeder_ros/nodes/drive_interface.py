@@ -23,7 +23,8 @@ tracked centre frequency and amplitude and is reported in ``/diagnostics`` (WARN
 
 Part feeding (level control, ``feed_parts``) is :mod:`feeder_ros.nodes.drive_feeding`,
 vibration-amplitude regulation (``amplitude.*``, ``set_vibration_amplitude``)
-:mod:`feeder_ros.nodes.drive_amplitude`, both ticked before the controller.
+:mod:`feeder_ros.nodes.drive_amplitude`, both ticked before the controller. The services'
+callbacks are the mixin :class:`feeder_ros.nodes.drive_services.DriveServices`.
 """
 
 from __future__ import annotations
@@ -43,11 +44,10 @@ from rclpy.qos import QoSProfile, ReliabilityPolicy
 from rclpy.time import Time
 from rclpy.validate_full_topic_name import validate_full_topic_name
 from std_msgs.msg import Header
-from std_srvs.srv import Trigger
 
 from feeder_ros.drive.backend import BackendStatus, DriveBackend, DriveOutput, SimBackend
 from feeder_ros.drive.controller import DriveController, DriveState
-from feeder_ros.drive.health import Level, drive_health
+from feeder_ros.drive.health import Level, drive_health, drive_values
 from feeder_ros.drive.level_control import LevelControl
 from feeder_ros.drive.limits import DriveLimits, Outcome
 from feeder_ros.drive.modbus import ModbusTcpBackend
@@ -79,13 +79,13 @@ from feeder_ros.nodes.drive_interface_parameters import (
     speed_model_source_from,
     tracker_settings_from,
 )
+from feeder_ros.nodes.drive_services import DriveServices
 from feeder_ros.nodes.drive_speed_feedback import SpeedFeedback
 from feeder_ros.nodes.ros_parameters import declare_parameters, validator
 from feeder_ros.nodes.ros_time import clock_seconds, stamp_seconds
 from feeder_ros.nodes.runner import run_node
 from feeder_ros.nodes.stall_detector import StallDetector
 from feeder_ros.physics.parameters import FeederParameters
-from feeder_ros.srv import SetDrive, SetTargetSpeed
 
 if TYPE_CHECKING:
     from feeder_ros.ros_compat import AnyParameter
@@ -125,7 +125,7 @@ def check_combination(values: dict[str, Any]) -> None:
 FEEDBACK_QOS = QoSProfile(depth=100, reliability=ReliabilityPolicy.RELIABLE)
 
 
-class DriveInterface(LifecycleNode):
+class DriveInterface(DriveServices, LifecycleNode):
     def __init__(self, **kwargs: Any) -> None:
         super().__init__(INTERFACE.node_name, **kwargs)
         self._values = declare_parameters(self, PARAMETERS.values(), DEFAULTS)
@@ -158,12 +158,7 @@ class DriveInterface(LifecycleNode):
         self._state_pub = self.create_publisher(DriveStateMsg, "drive/state", RELIABLE)
         self._diagnostics_pub = self.create_publisher(DiagnosticArray, "/diagnostics", RELIABLE)
         self.create_subscription(Header, "heartbeat", self._on_heartbeat, RELIABLE)
-        self.create_service(Trigger, "start", self._on_start)
-        self.create_service(Trigger, "stop", self._on_stop)
-        self.create_service(SetDrive, "set_drive", self._on_set_drive)
-        self.create_service(SetTargetSpeed, "set_target_speed", self._on_set_target_speed)
-        self.create_service(Trigger, "reset_fault", self._on_reset_fault)
-        self.create_service(Trigger, "emergency_stop", self._on_emergency_stop)
+        self._create_services()
         self._feeding = Feeding(self, self._values)
         self._amplitude = AmplitudeShell(self, self._values)
         # diagnostics in every lifecycle state: an unconfigured drive is worth a WARN too
@@ -530,7 +525,6 @@ class DriveInterface(LifecycleNode):
             return
         status = self._backend_status if self._backend_status is not None else backend.status()
         now = self._now()
-        age = controller.watchdog.age_s(now)
         tracked = self._tracked
         health = drive_health(
             controller,
@@ -539,33 +533,14 @@ class DriveInterface(LifecycleNode):
             self._amplitude.warning(),
             tracked.status(now) if tracked is not None else None,
         )
-        out = self._last_output
         values = {
-            "state": controller.state.name.lower(),
-            "active": str(controller.active),
-            "output enabled": str(out.enabled),
-            "frequency_hz": f"{out.frequency_hz:.3f}",
-            "amplitude_percent": f"{out.amplitude_percent:.3f}",
-            "amplitude_n": f"{out.amplitude_n:.3f}",
-            "target_frequency_hz": f"{controller.set_point.frequency_hz:.3f}",
-            "target_amplitude_percent": f"{controller.set_point.amplitude_percent:.3f}",
-            "heartbeat age s": "never" if math.isinf(age) else f"{age:.3f}",
-            "heartbeat timeout s": f"{controller.watchdog.timeout_s:g}",
-            "fault_reason": controller.fault_reason,
+            **drive_values(controller, status, self._last_output, now),
             "speed model": self._speed_source,
             "speed model calibration": self._speed_feedback.calibration_note,
             "speed trim": self._speed_feedback.trim_note,
-            "backend connected": str(status.connected),
-            "backend fault": status.fault,
-            "backend warning": status.warning,
-            **status.details,
             **self._feeding.diagnostics(),
             **self._amplitude.diagnostics(),
         }
-        if status.actual_frequency_hz is not None:
-            values["controller actual_frequency_hz"] = f"{status.actual_frequency_hz:.3f}"
-        if status.actual_amplitude_percent is not None:
-            values["controller actual_amplitude_percent"] = f"{status.actual_amplitude_percent:.3f}"
         if tracked is not None:
             feedback = (
                 f"{self.resolve_topic_name(self._values['tracking.feedback_topic'])} "
@@ -585,98 +560,6 @@ class DriveInterface(LifecycleNode):
     def _on_heartbeat(self, message: Header) -> None:
         if self._controller is not None:
             self._controller.heartbeat(self._now())
-
-    def _not_configured(self) -> str:
-        return "drive interface not configured (lifecycle: configure, then activate)"
-
-    def _on_start(self, request: Trigger.Request, response: Trigger.Response) -> Any:
-        controller, backend = self._controller, self._backend
-        if controller is None or backend is None:
-            response.success, response.message = False, self._not_configured()
-            return response
-        status = backend.status()
-        if not status.connected:
-            response.success = False
-            response.message = f"backend not connected: {status.fault or status.warning}"
-            return response
-        answer = controller.start(self._now())
-        response.success, response.message = answer.success, answer.message
-        if answer.success and status.warning:
-            response.message = f"{answer.message} (backend: {status.warning})"
-        return response
-
-    def _on_stop(self, request: Trigger.Request, response: Trigger.Response) -> Any:
-        if self._controller is None:
-            response.success, response.message = True, "not configured: output is off"
-            return response
-        answer = self._controller.stop(self._now())
-        response.success, response.message = answer.success, answer.message
-        return response
-
-    def _on_emergency_stop(self, request: Trigger.Request, response: Trigger.Response) -> Any:
-        if self._controller is None:
-            response.success, response.message = True, "not configured: output is off"
-            return response
-        answer = self._controller.emergency_stop(self._now())
-        self._tick()  # the zero goes out now, not at the next tick
-        self.get_logger().warning(f"emergency stop: {answer.message}")
-        response.success, response.message = answer.success, answer.message
-        return response
-
-    def _on_reset_fault(self, request: Trigger.Request, response: Trigger.Response) -> Any:
-        controller, backend = self._controller, self._backend
-        if controller is None or backend is None:
-            response.success, response.message = False, self._not_configured()
-            return response
-        answer = controller.reset_fault(self._now())
-        if answer.success:
-            self._feeding.reset_fault(self._now())
-        message = answer.message
-        if not answer.success and controller.backend_fault:
-            acknowledge = getattr(backend, "acknowledge_fault", None)
-            if acknowledge is not None:
-                acknowledge()
-                message += "; alarm reset sent to the controller, call reset_fault again"
-        response.success, response.message = answer.success, message
-        return response
-
-    def _on_set_drive(self, request: SetDrive.Request, response: SetDrive.Response) -> Any:
-        if self._controller is None:
-            response.result, response.reason = SetDrive.Response.REFUSED, self._not_configured()
-            return response
-        answer = self._controller.set_drive(
-            self._now(), request.frequency_hz, request.amplitude_percent, request.ramp_time_s
-        )
-        response.result = int(answer.outcome)
-        response.reason = answer.reason
-        response.frequency_hz = answer.frequency_hz
-        response.amplitude_percent = answer.amplitude_percent
-        response.ramp_time_s = answer.ramp_time_s
-        return response
-
-    def _on_set_target_speed(
-        self, request: SetTargetSpeed.Request, response: SetTargetSpeed.Response
-    ) -> Any:
-        if self._controller is None:
-            response.result = SetTargetSpeed.Response.REFUSED
-            response.reason = self._not_configured()
-            return response
-        answer = self._controller.set_target_speed(
-            self._now(), request.speed_mps, request.ramp_time_s
-        )
-        reason = answer.reason
-        if answer.outcome is not Outcome.REFUSED and self._tracked is not None:
-            # a new target: tracking restarts from the speed model's set point at the next tick
-            self._tracked.new_target()
-            if self._values["tracking.enabled"]:
-                note = "resonance tracking refines frequency and amplitude from this set point"
-                reason = f"{reason}; {note}" if reason else note
-        response.result = int(answer.outcome)
-        response.reason = reason
-        response.frequency_hz = answer.frequency_hz
-        response.amplitude_percent = answer.amplitude_percent
-        response.predicted_speed_mps = answer.predicted_speed_mps
-        return response
 
 
 NODE_CLASS = DriveInterface

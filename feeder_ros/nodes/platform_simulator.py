@@ -3,7 +3,8 @@
 Driven by ``drive/command``; publishes what a real feeder's sensors would (the carrier accelerometer
 as ``sensor_msgs/Imu``, part-present sensor edges, parts leaving the track) and the ground truth
 (carrier state, every part's state). All the physics is :class:`FeederSimulator`; this node turns
-parameters and messages into calls on it and samples into messages. With ``track_end:=stopper``
+parameters and messages into calls on it, and :class:`SimulatorOutputs` turns its samples into
+messages (:mod:`feeder_ros.nodes.simulator_outputs`). With ``track_end:=stopper``
 parts queue at the end of the track until picked (:class:`TrackEndQueue`, whose module states the
 model); the core's exits are then joins to the queue, and a pick is the part leaving the feeder.
 
@@ -27,22 +28,12 @@ from diagnostic_msgs.msg import DiagnosticArray
 from rclpy.clock import Clock
 from rclpy.clock_type import ClockType
 from rclpy.node import Node
-from rclpy.qos import DurabilityPolicy, HistoryPolicy, QoSProfile, ReliabilityPolicy
+from rclpy.qos import QoSProfile, ReliabilityPolicy
 from rclpy.time import Time
 from rosgraph_msgs.msg import Clock as ClockMessage
-from sensor_msgs.msg import Imu
 from std_srvs.srv import Trigger
 
-from feeder_ros.msg import (
-    AccelerometerBatch,
-    CarrierState,
-    CarrierStateBatch,
-    DriveCommand,
-    PartExit,
-    PartSensorEvent,
-    PartState,
-    PartStateArray,
-)
+from feeder_ros.msg import DriveCommand
 from feeder_ros.nodes.diagnostics import diagnostic_array, diagnostic_status
 from feeder_ros.nodes.platform_simulator_parameters import (
     INTERFACE,
@@ -54,11 +45,12 @@ from feeder_ros.nodes.platform_simulator_parameters import (
 from feeder_ros.nodes.ros_parameters import declare_parameters, validator
 from feeder_ros.nodes.ros_time import clock_seconds
 from feeder_ros.nodes.runner import run_node
+from feeder_ros.nodes.simulator_outputs import SimulatorOutputs
 from feeder_ros.physics.command_policy import Command, Decision, decide
 from feeder_ros.physics.drive import DriveError
 from feeder_ros.physics.errors import SimulationError
 from feeder_ros.physics.parameters import PARAMETER_SPECS, FeederParameters, ParameterError
-from feeder_ros.physics.simulation import EventKind, FeederSimulator, PartSpec, Phase
+from feeder_ros.physics.simulation import EventKind, FeederSimulator, PartSpec
 from feeder_ros.physics.simulation_health import simulation_health
 from feeder_ros.physics.track_end import Picks, TrackEndQueue, pick_edges, start_blocked
 from feeder_ros.sensors.accelerometer import AccelerometerModel
@@ -72,19 +64,6 @@ PHYSICS_DEFAULTS = FeederParameters().as_dict()
 #: a drive command's warning of one kind is logged at most this often
 WARNING_PERIOD_S = 5.0
 
-# sensor data: best effort and volatile like qos_profile_sensor_data, but with a history deep
-# enough for a tick's burst (at 1 kHz and 10 ms ticks, 10 samples leave at once): with
-# qos_profile_sensor_data's depth of 5 the writer itself overwrote samples before sending them
-SENSOR_QOS = QoSProfile(
-    depth=100,
-    history=HistoryPolicy.KEEP_LAST,
-    reliability=ReliabilityPolicy.BEST_EFFORT,
-    durability=DurabilityPolicy.VOLATILE,
-)
-# ground truth and events: reliable, with a second of history at 1 kHz for slow readers
-STATE_QOS = QoSProfile(
-    depth=1000, history=HistoryPolicy.KEEP_LAST, reliability=ReliabilityPolicy.RELIABLE
-)
 COMMAND_QOS = QoSProfile(depth=10, reliability=ReliabilityPolicy.RELIABLE)
 
 
@@ -106,16 +85,7 @@ class PlatformSimulator(Node):
         self._wall = Clock(clock_type=ClockType.STEADY_TIME)
 
         pub = self.create_publisher
-        self._batches = bool(self._values["publish_batches"])
-        if self._batches:
-            self._imu_pub = pub(AccelerometerBatch, "imu/batch", SENSOR_QOS)
-            self._state_pub = pub(CarrierStateBatch, "carrier/state_batch", STATE_QOS)
-        else:
-            self._imu_pub = pub(Imu, "imu", SENSOR_QOS)
-            self._state_pub = pub(CarrierState, "carrier/state", STATE_QOS)
-        self._parts_pub = pub(PartStateArray, "parts/state", STATE_QOS)
-        self._sensor_pub = pub(PartSensorEvent, "parts/sensor_events", STATE_QOS)
-        self._exit_pub = pub(PartExit, "parts/exit", STATE_QOS)
+        self._outputs = SimulatorOutputs(self, bool(self._values["publish_batches"]), self._stamp)
         self._clock_pub = pub(ClockMessage, "/clock", 10) if self._sim_clock else None
         self.create_subscription(DriveCommand, "drive/command", self._on_command, COMMAND_QOS)
         self.create_service(Trigger, "~/reset", self._on_reset)
@@ -229,8 +199,8 @@ class PlatformSimulator(Node):
         self._imu_index = 1  # sample k at k / rate; k = 0 is the state at rest, not published
         self._state_index = 1
         self._parts_index = 1
-        self._parts_out = self._feeds_blocked = 0  # feeds_blocked: see _bowl_feed
-        self._exit_listed = np.zeros(count, bool)  # exited parts already sent once on parts/state
+        self._outputs.restart(count)
+        self._feeds_blocked = 0  # see _bowl_feed
         self._last_feed_s = 0.0
         self._last_pick_s = 0.0
         self._epoch_ns = 0 if self._sim_clock else self.get_clock().now().nanoseconds
@@ -429,7 +399,7 @@ class PlatformSimulator(Node):
             lag = 0.0
             if factor > 0.0:
                 lag = self._pace_sim_s + (wall_now - self._pace_wall_s) * factor - sim_now
-            on_track = self._sim.part_count - self._parts_out
+            on_track = self._sim.part_count - self._outputs.parts_out
             achieved = (sim_now - sim_then) / max(wall_now - wall_then, 1e-9)
             late = self._late_commands
             plant = self._sim.params
@@ -442,7 +412,7 @@ class PlatformSimulator(Node):
                 "imu_samples_published": str(self._imu_index - 1),
                 "state_samples_published": str(self._state_index - 1),
                 "parts_on_track": str(on_track),
-                "parts_out_total": str(self._parts_out),
+                "parts_out_total": str(self._outputs.parts_out),
                 "feeds_skipped_start_blocked": str(self._feeds_blocked),
                 "track_end": self._values["track_end"],
                 "drive_frequency_hz": f"{self._drive[0]:g}",
@@ -514,15 +484,21 @@ class PlatformSimulator(Node):
         result = self._sim.advance(t_end, times)
         exits = result.event_kind == EventKind.PART_EXIT
         if queue is None:  # exits left the feeder; with a stopper they joined the queue
-            self._publish_exits(result.event_t_s[exits], result.event_part[exits])
+            self._outputs.exits(result.event_t_s[exits], result.event_part[exits])
         else:
-            self._publish_exits(np.full(len(picks.parts), t_start), picks.parts)
+            self._outputs.exits(np.full(len(picks.parts), t_start), picks.parts)
         if times.size == 0:
             return
         accel = result.carrier_a_mps2
         if imu_t.size:
             rows = np.searchsorted(times, imu_t)
-            self._publish_imu(imu_t, self._accelerometer.measure(accel[rows]))
+            self._outputs.imu(
+                imu_t,
+                self._accelerometer.measure(accel[rows]),
+                self._values["imu_frame_id"],
+                1.0 / self._values["imu_rate_hz"],
+                self._accelerometer.sigma,
+            )
         if state_t.size:
             rows = np.searchsorted(times, state_t)
             segment = np.clip(np.searchsorted(segments.start_s, state_t, "right") - 1, 0, None)
@@ -535,7 +511,7 @@ class PlatformSimulator(Node):
                 "drive_amplitude_n": segments.amplitude_n[segment],
                 "drive_force_n": segments.force(state_t),
             }
-            self._publish_states(state_t, columns)
+            self._outputs.states(state_t, columns, 1.0 / self._values["state_rate_hz"])
         track = result.part_x_m - result.carrier_x_m[:, None]
         if queue is None:
             edges = self._sensors.update(times, track)
@@ -544,108 +520,11 @@ class PlatformSimulator(Node):
             queue.settle(times, track, result.event_t_s[exits], result.event_part[exits])
             self._follow_queue()
             edges = pick_edges(self._sensors, times, track, before, picks)
-        for edge in edges:
-            event = PartSensorEvent()
-            event.header.stamp = self._stamp(edge.t_s)
-            event.sensor_index = edge.sensor_index
-            event.sensor_position_m = edge.position_m
-            event.part_id = edge.part
-            event.present = edge.present
-            self._sensor_pub.publish(event)
+        self._outputs.sensor_edges(edges)
         if parts_t.size:
             rows = np.searchsorted(times, parts_t)
             for j, row in enumerate(rows):
-                self._publish_parts(parts_t[j], result, row, track[row])
-
-    def _publish_imu(self, t: np.ndarray, measured: np.ndarray) -> None:
-        frame = self._values["imu_frame_id"]
-        if self._batches:
-            batch = AccelerometerBatch()
-            batch.header.stamp = self._stamp(float(t[0]))
-            batch.header.frame_id = frame
-            batch.sample_period_s = 1.0 / self._values["imu_rate_hz"]
-            batch.acceleration_x_mps2 = measured[:, 0].tolist()
-            batch.acceleration_y_mps2 = measured[:, 1].tolist()
-            batch.acceleration_z_mps2 = measured[:, 2].tolist()
-            batch.noise_stddev_mps2 = self._accelerometer.sigma
-            self._imu_pub.publish(batch)
-            return
-        variance = self._accelerometer.sigma**2
-        message = Imu()  # reused: publish() serialises at once
-        message.header.frame_id = frame
-        message.orientation_covariance[0] = -1.0  # no orientation estimate
-        message.angular_velocity_covariance[0] = -1.0  # no gyroscope
-        for k in (0, 4, 8):
-            message.linear_acceleration_covariance[k] = variance
-        acceleration = message.linear_acceleration
-        for j, (x, y, z) in enumerate(measured.tolist()):
-            message.header.stamp = self._stamp(float(t[j]))
-            acceleration.x, acceleration.y, acceleration.z = x, y, z
-            self._imu_pub.publish(message)
-
-    def _publish_states(self, t: np.ndarray, columns: dict[str, np.ndarray]) -> None:
-        if self._batches:
-            batch = CarrierStateBatch()
-            batch.header.stamp = self._stamp(float(t[0]))
-            batch.header.frame_id = "carrier"
-            batch.sample_period_s = 1.0 / self._values["state_rate_hz"]
-            for name, values in columns.items():
-                setattr(batch, name, values.tolist())
-            self._state_pub.publish(batch)
-            return
-        message = CarrierState()  # reused: publish() serialises at once
-        message.header.frame_id = "carrier"
-        rows = zip(*(values.tolist() for values in columns.values()), strict=True)
-        names = list(columns)
-        for j, row in enumerate(rows):
-            message.header.stamp = self._stamp(float(t[j]))
-            for name, value in zip(names, row, strict=True):
-                setattr(message, name, value)
-            self._state_pub.publish(message)
-
-    def _publish_parts(self, t: float, result: Any, row: int, track: np.ndarray) -> None:
-        message = PartStateArray()
-        message.header.stamp = self._stamp(t)
-        message.header.frame_id = "track"
-        carrier_v = float(result.carrier_v_mps[row])
-        phases = result.part_phase[row]
-        exited = np.isnan(track)  # left the core, and not queued at a stopper
-        queue = self._queue
-        queued = np.zeros(phases.size, bool) if queue is None else queue.queued_at(t, phases.size)
-        # the parts on the track, and each exited part once (on_track false): the message stays
-        # the size of the track's load however many parts have passed (listing every part ever
-        # fed grew it by a part per feed interval, and its cost with it, in every subscriber)
-        if self._exit_listed.size < phases.size:
-            self._exit_listed = np.concatenate(
-                (self._exit_listed, np.zeros(phases.size - self._exit_listed.size, bool))
-            )
-        listed = np.flatnonzero(~exited | ~self._exit_listed[: phases.size])
-        self._exit_listed[: phases.size] |= exited
-        for i in listed.tolist():
-            phase = int(phases[i])
-            part = PartState()
-            part.part_id = int(i)
-            part.on_track = not exited[i]
-            if part.on_track:  # a queued part stands still on the carrier
-                part.position_m = float(track[i])
-                part.velocity_mps = carrier_v if queued[i] else float(result.part_v_mps[row, i])
-                part.relative_velocity_mps = part.velocity_mps - carrier_v
-                part.phase = Phase.STICK if queued[i] else phase
-            else:
-                part.position_m = math.nan
-                part.velocity_mps = math.nan
-                part.relative_velocity_mps = math.nan
-            message.parts.append(part)
-        self._parts_pub.publish(message)
-
-    def _publish_exits(self, times: np.ndarray, parts: Any) -> None:
-        for t, part in zip(times, parts, strict=True):
-            self._parts_out += 1
-            message = PartExit()
-            message.header.stamp = self._stamp(float(t))
-            message.part_id = int(part)
-            message.parts_out_total = self._parts_out
-            self._exit_pub.publish(message)
+                self._outputs.parts(parts_t[j], result, row, track[row], queue)
 
 
 NODE_CLASS = PlatformSimulator

@@ -6,9 +6,9 @@ from __future__ import annotations
 
 import pytest
 
-from feeder_ros.drive.backend import BackendStatus
+from feeder_ros.drive.backend import BackendStatus, DriveOutput
 from feeder_ros.drive.controller import DriveController
-from feeder_ros.drive.health import Level, drive_health
+from feeder_ros.drive.health import Level, drive_health, drive_values
 from feeder_ros.drive.limits import DriveLimits
 from feeder_ros.drive.resonance_tracker import TrackerSettings
 from feeder_ros.drive.tracked_control import TrackedControl, apply_loop_point
@@ -122,3 +122,31 @@ def test_health_ranks_the_most_serious_first_and_warns_only_an_ok_drive() -> Non
     health = drive_health(c, CONNECTED, 1.0, amplitude_warning="at the drive's limit")
     assert (health.level, health.summary) == (Level.ERROR, "estop: button")
     assert [int(level) for level in Level] == [0, 1, 2]  # DiagnosticStatus's OK, WARN, ERROR
+
+
+def test_drive_values_report_output_set_point_heartbeat_and_backend() -> None:
+    c = DriveController(LIMITS, heartbeat_timeout_s=2.0)
+    output = DriveOutput(True, 21.0, 40.0, 12.5)
+    linked = BackendStatus(connected=True, warning="slow link", details={"port": "502"})
+    values = drive_values(c, linked, output, 0.0)
+    assert values["heartbeat age s"] == "never"
+    assert (values["state"], values["active"], values["output enabled"]) == (
+        "idle",
+        "False",
+        "True",
+    )
+    assert (values["frequency_hz"], values["amplitude_percent"], values["amplitude_n"]) == (
+        "21.000",
+        "40.000",
+        "12.500",
+    )
+    assert (values["backend warning"], values["port"]) == ("slow link", "502")
+    assert "controller actual_frequency_hz" not in values
+    c.heartbeat(1.0)
+    read_back = BackendStatus(
+        connected=True, actual_frequency_hz=20.9, actual_amplitude_percent=39.5
+    )
+    values = drive_values(c, read_back, output, 1.5)
+    assert (values["heartbeat age s"], values["heartbeat timeout s"]) == ("0.500", "2")
+    assert values["controller actual_frequency_hz"] == "20.900"
+    assert values["controller actual_amplitude_percent"] == "39.500"
