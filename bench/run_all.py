@@ -17,6 +17,7 @@ from pathlib import Path
 HERE = Path(__file__).resolve().parent
 BENCHMARKS = [
     ("Physics core (issue 3)", "bench_physics.py"),
+    ("The exact engine against the one before its cut into steps (issue 30)", "bench_engine_ab.py"),
     ("Sensorless estimator against ground truth (issue 4)", "eval_estimator.py"),
     ("The estimator on mismatched feeders, before and after calibration", "eval_mismatch.py"),
     ("Live nodes over DDS (issue 4)", "bench_live.py"),
