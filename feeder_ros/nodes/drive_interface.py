@@ -541,6 +541,8 @@ class DriveInterface(DriveServices, LifecycleNode):
             **self._feeding.diagnostics(),
             **self._amplitude.diagnostics(),
         }
+        if self._sim_stalls is not None:  # silence after its own stall counts later
+            values["stalls_seen"] = str(self._sim_stalls.stalls)
         if tracked is not None:
             feedback = (
                 f"{self.resolve_topic_name(self._values['tracking.feedback_topic'])} "
