@@ -31,21 +31,18 @@ from __future__ import annotations
 
 import math
 import os
-import time
 from typing import TYPE_CHECKING, Any
 
 from diagnostic_msgs.msg import DiagnosticArray
 from rcl_interfaces.msg import SetParametersResult
-from rclpy.duration import Duration
 from rclpy.exceptions import InvalidTopicNameException
 from rclpy.expand_topic_name import expand_topic_name
 from rclpy.lifecycle import LifecycleNode, LifecycleState, TransitionCallbackReturn
 from rclpy.qos import QoSProfile, ReliabilityPolicy
-from rclpy.time import Time
 from rclpy.validate_full_topic_name import validate_full_topic_name
 from std_msgs.msg import Header
 
-from feeder_ros.drive.backend import BackendStatus, DriveBackend, DriveOutput, SimBackend
+from feeder_ros.drive.backend import BackendStatus, DriveBackend, DriveOutput
 from feeder_ros.drive.controller import DriveController, DriveState
 from feeder_ros.drive.health import Level, drive_health, drive_values
 from feeder_ros.drive.level_control import LevelControl
@@ -59,8 +56,8 @@ from feeder_ros.drive.speed_model_source import (
     physics_speed_table,
 )
 from feeder_ros.drive.tracked_control import TrackedControl, apply_loop_point
-from feeder_ros.msg import DriveCommand, PartStateArray, SpeedStatus, VehicleEstimate
 from feeder_ros.msg import DriveState as DriveStateMsg
+from feeder_ros.msg import SpeedStatus, VehicleEstimate
 from feeder_ros.nodes.diagnostics import diagnostic_array, diagnostic_status
 from feeder_ros.nodes.drive_amplitude import AmplitudeShell
 from feeder_ros.nodes.drive_feeding import Feeding
@@ -80,19 +77,17 @@ from feeder_ros.nodes.drive_interface_parameters import (
     tracker_settings_from,
 )
 from feeder_ros.nodes.drive_services import DriveServices
+from feeder_ros.nodes.drive_sim_link import SimLink
 from feeder_ros.nodes.drive_speed_feedback import SpeedFeedback
 from feeder_ros.nodes.ros_parameters import declare_parameters, validator
 from feeder_ros.nodes.ros_time import clock_seconds, stamp_seconds
 from feeder_ros.nodes.runner import run_node
-from feeder_ros.nodes.stall_detector import StallDetector
 from feeder_ros.physics.parameters import FeederParameters
 
 if TYPE_CHECKING:
     from feeder_ros.ros_compat import AnyParameter
 
 RELIABLE = QoSProfile(depth=10, reliability=ReliabilityPolicy.RELIABLE)
-#: the simulator's parts/state, read only as a sign of life (sim backend)
-SIM_FEEDBACK_QOS = QoSProfile(depth=1, reliability=ReliabilityPolicy.BEST_EFFORT)
 #: threads a speed table not yet cached is simulated on at configure: one core is left to the
 #: nodes of the cell (the simulator and estimator must keep their sample rate meanwhile)
 SPEED_TABLE_THREADS = max(1, (os.cpu_count() or 1) - 1)
@@ -143,14 +138,10 @@ class DriveInterface(DriveServices, LifecycleNode):
         self._backend_status: BackendStatus | None = None
         self._logged_fault = ""  # the latched fault reason last logged (each new one is logged)
         self._speed_source = "none"
-        self._command_pub: Any = None
         self._loop_timers: list[Any] = []
         self._tracked: TrackedControl | None = None
         self._feedback_sub: Any = None
-        self._sim_sub: Any = None  # sim backend: the simulator's parts/state (a sign of life)
-        self._sim_heard: float | None = None  # time.monotonic() of its last message
-        self._sim_stalls: StallDetector | None = None
-        self._sim_listening = 0.0  # time.monotonic() since this node listens (after a stall)
+        self._sim_link: SimLink | None = None  # sim backend: drive/command and parts/state
         self._speed_feedback = SpeedFeedback(self, self._values, self._apply_point)
         self._last_output = DriveOutput(False, 0.0, 0.0, 0.0)
         # plain publishers: they exist unconfigured, and keep publishing the ramp to zero after
@@ -240,23 +231,10 @@ class DriveInterface(DriveServices, LifecycleNode):
         self._feeding.configure(self._controller, level)
         self._amplitude.configure(self._controller)
         if values["backend"] == "sim":
-            self._command_pub = self.create_publisher(DriveCommand, "drive/command", RELIABLE)
-            self._sim_heard = None
-            # this node's own stall (a loaded machine, a composed cell's busy thread) is not the
-            # simulator's silence: silence counts from the end of the catch-up after it
-            self._sim_stalls = StallDetector(
-                1.0 / values["publish_rate_hz"], start_s=time.monotonic()
+            self._sim_link = SimLink(
+                self, 1.0 / values["publish_rate_hz"], values["sim_feedback_timeout_s"]
             )
-            self._sim_listening = time.monotonic()
-            self._sim_sub = self.create_subscription(
-                PartStateArray, "parts/state", self._on_sim_parts, SIM_FEEDBACK_QOS
-            )
-            self._backend = SimBackend(
-                self._publish_command,
-                self._command_pub.get_subscription_count,
-                self._sim_feedback_age,
-                values["sim_feedback_timeout_s"],
-            )
+            self._backend = self._sim_link.backend
         else:
             self._backend = ModbusTcpBackend(
                 modbus_settings_from(values), register_map_from(values)
@@ -338,9 +316,6 @@ class DriveInterface(DriveServices, LifecycleNode):
         self._speed_feedback.teardown()
         self._feeding.teardown(self._now())
         self._amplitude.teardown()
-        if self._sim_sub is not None:
-            self.destroy_subscription(self._sim_sub)
-            self._sim_sub = None
         if self._feedback_sub is not None:
             self.destroy_subscription(self._feedback_sub)
             self._feedback_sub = None
@@ -350,13 +325,9 @@ class DriveInterface(DriveServices, LifecycleNode):
         if self._backend is not None:
             self._backend.disconnect()
             self._backend = None
-        if self._command_pub is not None:
-            # the last (disabled) command must reach the feeder before the writer goes away:
-            # destroying a reliable writer drops what readers have not acknowledged yet
-            if self.context.ok():
-                self._command_pub.wait_for_all_acked(Duration(seconds=1.0))
-            self.destroy_publisher(self._command_pub)
-            self._command_pub = None
+        if self._sim_link is not None:
+            self._sim_link.close()
+            self._sim_link = None
 
     def destroy_node(self) -> None:
         try:
@@ -371,35 +342,13 @@ class DriveInterface(DriveServices, LifecycleNode):
         super().destroy_node()  # type: ignore[no-untyped-call,unused-ignore]  # untyped on Jazzy
 
     # -- the loop ------------------------------------------------------------------------------
-    def _on_sim_parts(self, message: PartStateArray) -> None:
-        self._sim_heard = time.monotonic()  # wall time: a simulator gone stops /clock too
-
-    def _sim_feedback_age(self) -> float | None:
-        heard = self._sim_heard
-        if heard is None:
-            return None
-        return time.monotonic() - max(heard, self._sim_listening)
-
-    def _publish_command(self, output: DriveOutput) -> None:
-        if self._command_pub is None or not self.context.ok():
-            return  # shutting down after Ctrl-C: the simulator takes a silent drive as a stop
-        message = DriveCommand()
-        # stamped with the time the ramp value was computed for, so that stamps and values agree
-        message.header.stamp = Time(nanoseconds=round(output.time_s * 1e9)).to_msg()
-        message.enabled = output.enabled
-        message.frequency_hz = output.frequency_hz
-        message.amplitude_percent = output.amplitude_percent
-        message.amplitude_n = output.amplitude_n
-        message.ramp_time_s = output.ramp_time_s
-        self._command_pub.publish(message)
-
     def _tick(self) -> None:
         controller, backend = self._controller, self._backend
         if controller is None or backend is None:
             return
         now = self._now()
-        if self._sim_stalls is not None and self._sim_stalls.resuming(time.monotonic()):
-            self._sim_listening = time.monotonic()  # (called here only: once per loop tick)
+        if self._sim_link is not None:
+            self._sim_link.tick()
         status = self._backend_status = backend.status()
         if status.fault != controller.backend_fault:
             was_faulted = bool(controller.backend_fault)
@@ -541,8 +490,8 @@ class DriveInterface(DriveServices, LifecycleNode):
             **self._feeding.diagnostics(),
             **self._amplitude.diagnostics(),
         }
-        if self._sim_stalls is not None:  # silence after its own stall counts later
-            values["stalls_seen"] = str(self._sim_stalls.stalls)
+        if self._sim_link is not None:  # silence after its own stall counts later
+            values["stalls_seen"] = str(self._sim_link.stalls)
         if tracked is not None:
             feedback = (
                 f"{self.resolve_topic_name(self._values['tracking.feedback_topic'])} "

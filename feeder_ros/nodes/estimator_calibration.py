@@ -31,148 +31,21 @@ from feeder_ros.estimation.calibration_file import (
     read_calibration,
     write_calibration,
 )
-from feeder_ros.estimation.online_calibration import MeasurementSource
 from feeder_ros.estimation.part_belief import PartBelief
 from feeder_ros.estimation.stick_slip_observer import PartModel
 from feeder_ros.estimation.vehicle_estimator import VehicleEstimator
 from feeder_ros.msg import PartCalibration, PartSensorEvent
-from feeder_ros.node_interfaces import ServiceSpec, TopicSpec
 from feeder_ros.nodes.diagnostics import diagnostic_status
 from feeder_ros.nodes.ros_time import stamp_seconds
-from feeder_ros.physics.parameters import ParameterError, ParameterSpec
+from feeder_ros.nodes.vehicle_estimator_parameters import measurement_source
 from feeder_ros.srv import SetMeasuredSpeed
 
-__all__ = ["DEFAULTS", "PARAMETERS", "PUBLISHES", "SERVICES", "SUBSCRIBES", "EstimatorCalibration"]
+__all__ = ["EstimatorCalibration"]
 
 LATCHED_QOS = QoSProfile(
     depth=1, reliability=ReliabilityPolicy.RELIABLE, durability=DurabilityPolicy.TRANSIENT_LOCAL
 )
 EVENT_QOS = QoSProfile(depth=100, reliability=ReliabilityPolicy.RELIABLE)
-
-PARAMETERS: dict[str, ParameterSpec] = {
-    spec.name: spec
-    for spec in (
-        ParameterSpec(
-            "calibration.enabled",
-            bool,
-            "",
-            "calibrate the part model online from sensor transits and operator speeds",
-            read_only=True,
-        ),
-        ParameterSpec(
-            "calibration.file",
-            str,
-            "",
-            "calibration YAML read at start and rewritten (atomically) on every update; empty: "
-            "none (the calibration is lost on restart)",
-            read_only=True,
-        ),
-        ParameterSpec(
-            "calibration.friction_uncertainty",
-            float,
-            "1",
-            "relative standard uncertainty of the uncalibrated friction (stick limit and slip "
-            "deceleration)",
-            0.0,
-            2.0,
-            read_only=True,
-        ),
-        ParameterSpec(
-            "calibration.gain_uncertainty",
-            float,
-            "1",
-            "relative standard uncertainty of the accelerometer's gain",
-            0.0,
-            0.5,
-            read_only=True,
-        ),
-        ParameterSpec(
-            "calibration.sensor_positions_m",
-            str,
-            "m",
-            "track positions of the part-present sensors by index, as 'a, b, ...' (the "
-            "simulator's sensor_positions_m); empty: no transit calibration",
-            read_only=True,
-        ),
-        ParameterSpec(
-            "calibration.transit_sensors",
-            str,
-            "",
-            "the two sensors whose rising edges are timed, as 'first, second'",
-            read_only=True,
-        ),
-        ParameterSpec(
-            "calibration.transit_uncertainty",
-            float,
-            "1",
-            "relative standard uncertainty of one transit speed besides its timing (part to part, "
-            "sensor jitter)",
-            0.0,
-            1.0,
-            exclusive_minimum=True,
-            read_only=True,
-        ),
-    )
-}
-DEFAULTS: dict[str, Any] = {
-    "calibration.enabled": True,
-    "calibration.file": "",
-    "calibration.friction_uncertainty": 0.3,
-    "calibration.gain_uncertainty": 0.03,
-    "calibration.sensor_positions_m": "",
-    "calibration.transit_sensors": "0, 1",
-    "calibration.transit_uncertainty": 0.01,
-}
-PUBLISHES = (
-    TopicSpec(
-        "calibration",
-        "feeder_ros/msg/PartCalibration",
-        "reliable, transient local, depth 1",
-        "the part model in use (stick limit, slip deceleration, gain), its uncertainty and the "
-        "measurements behind it; on every change",
-    ),
-)
-SUBSCRIBES = (
-    TopicSpec(
-        "parts/sensor_events",
-        "feeder_ros/msg/PartSensorEvent",
-        "reliable, depth 100",
-        "part-present sensor edges: transits between calibration.transit_sensors calibrate the "
-        "part model",
-    ),
-)
-SERVICES = (
-    ServiceSpec(
-        "calibration/measured_speed",
-        "feeder_ros/srv/SetMeasuredSpeed",
-        "an operator's measured part speed at the current drive setting: accepted into the "
-        "calibration, or refused with the reason",
-    ),
-    ServiceSpec(
-        "calibration/reset", "std_srvs/srv/Trigger", "forget the calibration: the nominal part"
-    ),
-)
-
-
-def _numbers(name: str, text: str) -> tuple[float, ...]:
-    try:
-        return tuple(float(x) for x in text.replace(",", " ").split())
-    except ValueError:
-        raise ParameterError(f"{name}={text!r} is not a list of numbers") from None
-
-
-def measurement_source(values: dict[str, Any]) -> MeasurementSource:
-    """The transit pairing the parameters describe (raises ParameterError naming a bad one)."""
-    positions = _numbers("calibration.sensor_positions_m", values["calibration.sensor_positions_m"])
-    pair = _numbers("calibration.transit_sensors", values["calibration.transit_sensors"])
-    if len(pair) != 2 or any(p != int(p) for p in pair):
-        raise ParameterError(
-            f"calibration.transit_sensors={values['calibration.transit_sensors']!r} must be two "
-            "sensor indices"
-        )
-    return MeasurementSource(
-        positions, (int(pair[0]), int(pair[1])), values["calibration.transit_uncertainty"]
-    )
 
 
 class EstimatorCalibration:

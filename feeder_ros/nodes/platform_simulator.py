@@ -4,7 +4,8 @@ Driven by ``drive/command``; publishes what a real feeder's sensors would (the c
 as ``sensor_msgs/Imu``, part-present sensor edges, parts leaving the track) and the ground truth
 (carrier state, every part's state). All the physics is :class:`FeederSimulator`; this node turns
 parameters and messages into calls on it, and :class:`SimulatorOutputs` turns its samples into
-messages (:mod:`feeder_ros.nodes.simulator_outputs`). With ``track_end:=stopper``
+messages (:mod:`feeder_ros.nodes.simulator_outputs`); its services are
+:mod:`feeder_ros.nodes.simulator_services`. With ``track_end:=stopper``
 parts queue at the end of the track until picked (:class:`TrackEndQueue`, whose module states the
 model); the core's exits are then joins to the queue, and a pick is the part leaving the feeder.
 
@@ -31,7 +32,6 @@ from rclpy.node import Node
 from rclpy.qos import QoSProfile, ReliabilityPolicy
 from rclpy.time import Time
 from rosgraph_msgs.msg import Clock as ClockMessage
-from std_srvs.srv import Trigger
 
 from feeder_ros.msg import DriveCommand
 from feeder_ros.nodes.diagnostics import diagnostic_array, diagnostic_status
@@ -46,6 +46,7 @@ from feeder_ros.nodes.ros_parameters import declare_parameters, validator
 from feeder_ros.nodes.ros_time import clock_seconds
 from feeder_ros.nodes.runner import run_node
 from feeder_ros.nodes.simulator_outputs import SimulatorOutputs
+from feeder_ros.nodes.simulator_services import SimulatorServices
 from feeder_ros.physics.command_policy import Command, Decision, decide
 from feeder_ros.physics.drive import DriveError
 from feeder_ros.physics.errors import SimulationError
@@ -55,7 +56,6 @@ from feeder_ros.physics.simulation_health import simulation_health
 from feeder_ros.physics.track_end import Picks, TrackEndQueue, pick_edges, start_blocked
 from feeder_ros.sensors.accelerometer import AccelerometerModel
 from feeder_ros.sensors.part_presence import PartSensorArray
-from feeder_ros.srv import SpawnParts
 
 if TYPE_CHECKING:
     from feeder_ros.ros_compat import AnyParameter
@@ -67,7 +67,7 @@ WARNING_PERIOD_S = 5.0
 COMMAND_QOS = QoSProfile(depth=10, reliability=ReliabilityPolicy.RELIABLE)
 
 
-class PlatformSimulator(Node):
+class PlatformSimulator(SimulatorServices, Node):
     def __init__(self, **kwargs: Any) -> None:
         super().__init__(INTERFACE.node_name, **kwargs)
         self._values = declare_parameters(
@@ -88,9 +88,7 @@ class PlatformSimulator(Node):
         self._outputs = SimulatorOutputs(self, bool(self._values["publish_batches"]), self._stamp)
         self._clock_pub = pub(ClockMessage, "/clock", 10) if self._sim_clock else None
         self.create_subscription(DriveCommand, "drive/command", self._on_command, COMMAND_QOS)
-        self.create_service(Trigger, "~/reset", self._on_reset)
-        self.create_service(SpawnParts, "~/spawn_parts", self._on_spawn)
-        self.create_service(Trigger, "~/pick_part", self._on_pick)
+        self._create_services()
 
         self._failure: str | None = None  # the last solver failure, until the drive runs again
         self._late_commands = 0  # commands applied at once because the simulation lagged
@@ -283,54 +281,6 @@ class PlatformSimulator(Node):
             self._sim.set_drive(self._drive[0], 0.0, at_time_s=at_s)
             self._drive = (self._drive[0], 0.0)
         self._command_deadline_s = math.inf
-
-    def _on_reset(self, request: Trigger.Request, response: Trigger.Response) -> Any:
-        with self._lock:
-            self._start()
-        response.success = True
-        response.message = f"reset to t = 0 with {self._sim.part_count} parts"
-        return response
-
-    def _on_spawn(self, request: SpawnParts.Request, response: SpawnParts.Response) -> Any:
-        problems = []
-        if request.count < 1 or request.count > 10000:
-            problems.append(f"count={request.count} must be in 1..10000")
-        for name in ("position_m", "spacing_m"):
-            value = getattr(request, name)
-            if not math.isfinite(value) or value < 0.0:
-                problems.append(f"{name}={value!r} must be a finite value >= 0")
-        end, limit = self._values["track_length_m"], "track_length_m"
-        if self._queue is not None:
-            end, limit = self._queue.tail_m, "the tail of the queue at the stopper"
-        if not problems and request.position_m + (request.count - 1) * request.spacing_m >= end:
-            problems.append(
-                f"parts from {request.position_m} m spaced {request.spacing_m} m do not fit on "
-                f"the track ({limit}: {end:g} m)"
-            )
-        if problems:
-            response.success = False
-            response.message = "; ".join(problems)
-            return response
-        with self._lock:
-            ids = [
-                self._sim.spawn_part(
-                    PartSpec(position_m=request.position_m + i * request.spacing_m), at_rest=True
-                )
-                for i in range(request.count)
-            ]
-        response.success = True
-        response.part_ids = ids
-        response.message = f"spawned {len(ids)} parts"
-        return response
-
-    def _on_pick(self, request: Trigger.Request, response: Trigger.Response) -> Any:
-        with self._lock:
-            response.success, response.message = (
-                (False, "track_end is open: parts leave at the end of the track")
-                if self._queue is None
-                else self._queue.answer_pick(self._sim.time_s)
-            )
-        return response
 
     # -- the loop ------------------------------------------------------------------------------
     def _schedule_time(self) -> float:

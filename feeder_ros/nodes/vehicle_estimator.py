@@ -29,128 +29,28 @@ from rclpy.qos_overriding_options import QoSOverridingOptions
 from sensor_msgs.msg import Imu
 
 from feeder_ros.estimation.estimator_records import input_health
-from feeder_ros.estimation.part_belief import PartBelief
-from feeder_ros.estimation.stick_slip_observer import PartModel
-from feeder_ros.estimation.vehicle_estimator import (
-    EstimatorConfig,
-    VehicleEstimator,
-    load_kernels,
-)
 from feeder_ros.estimation.vehicle_estimator import VehicleEstimate as EstimateRecord
+from feeder_ros.estimation.vehicle_estimator import load_kernels
 from feeder_ros.msg import AccelerometerBatch, CarrierState, DriveCommand, VehicleEstimate
-from feeder_ros.node_interfaces import NodeInterface, TopicSpec
-from feeder_ros.nodes import estimator_calibration as calibration
 from feeder_ros.nodes.diagnostics import diagnostic_array, diagnostic_status
-from feeder_ros.nodes.estimator_calibration import EstimatorCalibration, measurement_source
+from feeder_ros.nodes.estimator_calibration import EstimatorCalibration
 from feeder_ros.nodes.ros_parameters import declare_parameters, validator
 from feeder_ros.nodes.ros_time import stamp_seconds
 from feeder_ros.nodes.runner import run_node
 from feeder_ros.nodes.stall_detector import StallDetector
-from feeder_ros.physics.parameters import (
-    PARAMETER_SPECS,
-    FeederParameters,
-    ParameterError,
-    ParameterSpec,
+from feeder_ros.nodes.vehicle_estimator_parameters import (
+    AXES,
+    DEFAULTS,
+    INTERFACE,
+    PARAMETERS,
+    build_estimator,
+    check_combination,
+    nominal_part,
 )
 
 if TYPE_CHECKING:
     from feeder_ros.ros_compat import AnyParameter
 
-_AXES = ("x", "y", "z")
-_PART_PARAMETERS = ("static_friction", "kinetic_friction", "groove_angle_deg", "gravity_mps2")
-PARAMETERS: dict[str, ParameterSpec] = {
-    **{name: PARAMETER_SPECS[name] for name in _PART_PARAMETERS},
-    **{
-        spec.name: spec
-        for spec in (
-            ParameterSpec(
-                "window_s", float, "s", "window of the mean speed and slip fraction", 0.05, 600.0
-            ),
-            ParameterSpec(
-                "fit_window_s", float, "s", "window of the periodic carrier fit", 0.05, 60.0
-            ),
-            ParameterSpec(
-                "max_harmonic_hz", float, "Hz", "highest harmonic of the carrier fit", 1.0, 1e4
-            ),
-            ParameterSpec(
-                "max_bridge_s", float, "s", "gaps up to this long are bridged by the model", 0.0
-            ),
-            # the band the drive line is sought in without a drive command: a carrier answering
-            # at a subharmonic (period of 2-4 drive periods) has its strongest line below the
-            # drive frequency, so the band should be the drive's range (live: a change restarts
-            # the estimator, as the window parameters do)
-            ParameterSpec(
-                "min_drive_frequency_hz",
-                float,
-                "Hz",
-                "lower end of the drive frequency search band when no drive command is received",
-                0.1,
-                10000.0,
-            ),
-            ParameterSpec(
-                "max_drive_frequency_hz",
-                float,
-                "Hz",
-                "upper end of the drive frequency search band when no drive command is received",
-                0.1,
-                10000.0,
-            ),
-            ParameterSpec(
-                "publish_rate_hz", float, "Hz", "estimate publish rate", 0.5, 200.0, read_only=True
-            ),
-            ParameterSpec(
-                "imu_axis",
-                str,
-                "",
-                "accelerometer axis along the track",
-                choices=_AXES,
-                read_only=True,
-            ),
-            ParameterSpec(
-                "use_carrier_state",
-                bool,
-                "",
-                "estimate from a displacement sensor (carrier/state) instead of the accelerometer",
-                read_only=True,
-            ),
-            ParameterSpec(
-                "input_timeout_s",
-                float,
-                "s",
-                "no sample for this long once samples came is a sensor timeout (diagnostics ERROR)",
-                minimum=0.0,
-                exclusive_minimum=True,
-            ),
-            # bring-up is not a steady stream: the sensor's node or driver may start seconds
-            # after this one (a cell's processes load at once; the simulator loads its solver)
-            ParameterSpec(
-                "startup_timeout_s",
-                float,
-                "s",
-                "no first sample this long after the start is a sensor error (diagnostics "
-                "ERROR; WARN while waiting)",
-                minimum=0.0,
-                exclusive_minimum=True,
-            ),
-        )
-    },
-    **calibration.PARAMETERS,
-}
-DEFAULTS: dict[str, Any] = {
-    **{name: getattr(FeederParameters(), name) for name in _PART_PARAMETERS},
-    "window_s": 2.0,
-    "fit_window_s": 1.0,
-    "max_harmonic_hz": 450.0,
-    "max_bridge_s": 0.25,
-    "min_drive_frequency_hz": EstimatorConfig.frequency_band_hz[0],
-    "max_drive_frequency_hz": EstimatorConfig.frequency_band_hz[1],
-    "publish_rate_hz": 20.0,
-    "imu_axis": "x",
-    "use_carrier_state": False,
-    "input_timeout_s": 1.0,
-    "startup_timeout_s": 10.0,
-    **calibration.DEFAULTS,
-}
 DIAGNOSTICS_PERIOD_S = 1.0  # the diagnostics timer's period (a later tick: the node stalled)
 #: an accelerometer batch with a longer sample period is refused (the estimator needs a fast
 #: accelerometer; a period in ns or ms sent as seconds would put stamps far in the future)
@@ -158,58 +58,6 @@ MAX_SAMPLE_PERIOD_S = 1.0
 SENSOR_QOS = QoSProfile(depth=500, reliability=ReliabilityPolicy.BEST_EFFORT)
 RELIABLE_QOS = QoSProfile(depth=1000, reliability=ReliabilityPolicy.RELIABLE)
 COMMAND_QOS = QoSProfile(depth=10, reliability=ReliabilityPolicy.RELIABLE)
-
-INTERFACE = NodeInterface(
-    executable="vehicle_estimator",
-    node_name="vehicle_estimator",
-    summary="estimates a nominal part's speed and stick/slip phase from the carrier accelerometer",
-    publishes=(
-        TopicSpec(
-            "estimate",
-            "feeder_ros/msg/VehicleEstimate",
-            "reliable, depth 10",
-            "part velocity and mean speed with their standard uncertainties (mean speed NaN while "
-            "SETTLING), phase, advance per cycle, slip fraction, confidences",
-        ),
-        TopicSpec(
-            "/diagnostics",
-            "diagnostic_msgs/msg/DiagnosticArray",
-            "reliable, depth 10",
-            "estimator status at 1 Hz (input gaps, invalid samples, timeouts) and the "
-            "calibration's (file problems, refused measurements)",
-        ),
-        *calibration.PUBLISHES,
-    ),
-    subscribes=(
-        TopicSpec(
-            "imu",
-            "sensor_msgs/msg/Imu",
-            "sensor data, depth 500 (qos_overrides: reliability, history, depth)",
-            "carrier accelerometer",
-        ),
-        TopicSpec(
-            "imu/batch",
-            "feeder_ros/msg/AccelerometerBatch",
-            "sensor data, depth 500 (qos_overrides: reliability, history, depth)",
-            "the same as batches (high-rate sensors)",
-        ),
-        TopicSpec(
-            "drive/command",
-            "feeder_ros/msg/DriveCommand",
-            "reliable, depth 10",
-            "drive frequency (optional; estimated from the spectrum without it)",
-        ),
-        TopicSpec(
-            "carrier/state",
-            "feeder_ros/msg/CarrierState",
-            "reliable, depth 1000",
-            "carrier displacement, used when use_carrier_state is true",
-        ),
-        *calibration.SUBSCRIBES,
-    ),
-    services=calibration.SERVICES,
-    parameters=PARAMETERS,
-)
 
 _IMU_AFTER_HEADER = 8 * (4 + 9 + 3 + 9)  # orientation, its covariance, angular velocity, its cov.
 
@@ -236,43 +84,6 @@ def imu_sample(data: bytes) -> tuple[float, tuple[float, float, float]]:
     return sec + nanosec * 1e-9, (x, y, z)
 
 
-def _check_combination(values: dict[str, Any]) -> None:
-    low, high = values["min_drive_frequency_hz"], values["max_drive_frequency_hz"]
-    if low >= high:
-        raise ParameterError(
-            f"min_drive_frequency_hz={low:g} Hz must be below max_drive_frequency_hz={high:g} Hz"
-        )
-    _build_estimator(values)
-    measurement_source(values)
-
-
-def _nominal_part(values: dict[str, Any]) -> PartModel:
-    kappa = 1.0 / math.sin(math.radians(values["groove_angle_deg"]) / 2.0)
-    return PartModel(
-        values["static_friction"], values["kinetic_friction"], kappa, values["gravity_mps2"]
-    )
-
-
-def _build_estimator(values: dict[str, Any], belief: PartBelief | None = None) -> VehicleEstimator:
-    """A fresh estimator for these parameter values (raises ParameterError naming a bad one),
-    running ``belief`` (default: the nominal part with the stated uncertainties)."""
-    part = _nominal_part(values)
-    fit_window = values["fit_window_s"]
-    config = EstimatorConfig(
-        part=part,
-        window_s=values["window_s"],
-        fit_window_s=fit_window,
-        min_fit_s=min(0.3, fit_window),
-        max_harmonic_hz=values["max_harmonic_hz"],
-        max_bridge_s=values["max_bridge_s"],
-        frequency_band_hz=(values["min_drive_frequency_hz"], values["max_drive_frequency_hz"]),
-        batch_interval_s=0.0,  # the node already batches per publish period
-        friction_uncertainty=values["calibration.friction_uncertainty"],
-        gain_uncertainty=values["calibration.gain_uncertainty"],
-    )
-    return VehicleEstimator(config, belief)
-
-
 class VehicleEstimatorNode(Node):
     def __init__(self, **kwargs: Any) -> None:
         # before the node joins the graph: a cell waits for it, and its first estimates then
@@ -283,16 +94,16 @@ class VehicleEstimatorNode(Node):
         super().__init__(INTERFACE.node_name, **kwargs)
         self.get_logger().debug(f"estimator kernels loaded in {loaded_s:.2f} s")
         self._values = declare_parameters(self, PARAMETERS.values(), DEFAULTS)
-        _check_combination(self._values)
+        check_combination(self._values)
         self.add_on_set_parameters_callback(
-            validator(PARAMETERS, check_all=_check_combination, current=lambda: self._values)
+            validator(PARAMETERS, check_all=check_combination, current=lambda: self._values)
         )
         self.add_post_set_parameters_callback(self._apply_parameters)
         self._lock = threading.Lock()
         #: the last accepted drive command (frequency [Hz], amplitude, stamp [s]): a rebuilt
         #: estimator (a parameter change) starts with it instead of searching for the frequency
         self._drive: tuple[float, float, float] | None = None
-        self._estimator = _build_estimator(self._values)
+        self._estimator = build_estimator(self._values)
         self._queue_t: list[float] = []
         self._queue_value: list[float] = []
         self._batches: list[tuple[np.ndarray, np.ndarray]] = []
@@ -304,9 +115,9 @@ class VehicleEstimatorNode(Node):
         self._stalls = StallDetector(DIAGNOSTICS_PERIOD_S, start_s=time.monotonic())
         self._listening_since = self._last_input
         self._record: EstimateRecord = self._estimator.last_estimate
-        self._axis = _AXES.index(self._values["imu_axis"])
+        self._axis = AXES.index(self._values["imu_axis"])
         self._calibration = EstimatorCalibration(
-            self, self._lock, lambda: self._estimator, _nominal_part(self._values), self._values
+            self, self._lock, lambda: self._estimator, nominal_part(self._values), self._values
         )
         self._estimator.set_belief(self._calibration.belief)  # e.g. read from the file
 
@@ -342,10 +153,10 @@ class VehicleEstimatorNode(Node):
                 changed = True
         if changed:
             with self._lock:  # a new nominal part or window: start over
-                nominal = _nominal_part(self._values)
+                nominal = nominal_part(self._values)
                 if nominal != self._calibration.belief.nominal:
                     self._calibration.renominate(nominal)
-                self._estimator = _build_estimator(self._values, self._calibration.belief)
+                self._estimator = build_estimator(self._values, self._calibration.belief)
                 if self._drive is not None:  # the drive in force is still in force
                     self._estimator.set_drive(*self._drive)
                 self._record = self._estimator.last_estimate

@@ -2,6 +2,7 @@
 
 from __future__ import annotations
 
+import math
 import sys
 import time
 from pathlib import Path
@@ -18,6 +19,7 @@ from sensor_msgs.msg import Imu
 from std_srvs.srv import Trigger
 
 from feeder_ros.msg import CarrierState, DriveCommand, PartStateArray
+from feeder_ros.nodes.simulator_services import spawn_refusal
 from feeder_ros.srv import SpawnParts
 
 SIMULATOR = str(Path(sys.executable).parent / "platform_simulator")
@@ -151,6 +153,23 @@ def test_parameters_are_validated_and_applied_live() -> None:
             GetParameters.Request(names=["static_friction", "kinetic_friction"]),
         ).values  # fmt: skip
         assert [v.double_value for v in values] == [0.3, 0.1]
+
+
+def test_a_spawn_request_is_refused_naming_each_bad_value() -> None:
+    assert spawn_refusal(3, 0.1, 0.05, 0.5, "track_length_m") == ""
+    assert spawn_refusal(0, 0.1, 0.05, 0.5, "x") == "count=0 must be in 1..10000"
+    assert spawn_refusal(10001, 0.1, 0.0, 0.5, "x") == "count=10001 must be in 1..10000"
+    both = spawn_refusal(1, math.nan, -0.1, 0.5, "x")
+    assert both == (
+        "position_m=nan must be a finite value >= 0; spacing_m=-0.1 must be a finite value >= 0"
+    )
+    # the last part at 0.1 + 2 * 0.2 = 0.5 m: on the end is off the track
+    assert spawn_refusal(3, 0.1, 0.2, 0.5, "track_length_m") == (
+        "parts from 0.1 m spaced 0.2 m do not fit on the track (track_length_m: 0.5 m)"
+    )
+    assert "(the tail of the queue: 0.3 m)" in spawn_refusal(
+        3, 0.1, 0.1, 0.3, "the tail of the queue"
+    )
 
 
 def test_spawn_and_reset_services_and_part_states() -> None:

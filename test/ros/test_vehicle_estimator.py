@@ -29,7 +29,8 @@ from ros_test_tools import call, probe_node, running, wait_until
 from sensor_msgs.msg import Imu
 
 from feeder_ros.msg import CarrierState, DriveCommand, PartStateArray, VehicleEstimate
-from feeder_ros.nodes.vehicle_estimator import DEFAULTS, _build_estimator, imu_sample
+from feeder_ros.nodes.vehicle_estimator import imu_sample
+from feeder_ros.nodes.vehicle_estimator_parameters import DEFAULTS, build_estimator
 
 BIN = Path(sys.executable).parent
 CONFIG = Path(__file__).resolve().parents[2] / "config" / "platform_simulator.yaml"
@@ -355,8 +356,8 @@ def test_drive_frequency_band_is_declared_and_min_below_max_is_enforced() -> Non
 
 def test_the_band_parameters_become_the_estimators_search_band() -> None:
     values = {**DEFAULTS, "min_drive_frequency_hz": 20.0, "max_drive_frequency_hz": 60.0}
-    assert _build_estimator(values).config.frequency_band_hz == (20.0, 60.0)
-    assert _build_estimator(dict(DEFAULTS)).config.frequency_band_hz == (2.0, 300.0)
+    assert build_estimator(values).config.frequency_band_hz == (20.0, 60.0)
+    assert build_estimator(dict(DEFAULTS)).config.frequency_band_hz == (2.0, 300.0)
 
 
 def test_node_refuses_to_start_with_min_not_below_max() -> None:
