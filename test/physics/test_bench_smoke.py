@@ -56,3 +56,26 @@ def test_benchmark_quick_run_writes_its_report(tmp_path: Path) -> None:
     for line in engine_rows:
         error = float(line.split("|")[5])
         assert error < 1e-9
+
+
+@pytest.mark.parametrize(
+    ("arguments", "message"),
+    [
+        (
+            ["--against", "no-such-rev"],
+            "--against 'no-such-rev' is not a commit of this repository",
+        ),
+        (["--rounds", "0"], "--rounds must be at least 1, got 0"),
+    ],
+)
+def test_the_engine_ab_refuses_a_bad_argument_by_name(arguments: list[str], message: str) -> None:
+    completed = subprocess.run(
+        [sys.executable, str(REPO / "bench" / "bench_engine_ab.py"), *arguments],
+        capture_output=True,
+        text=True,
+        timeout=60,
+        check=False,
+    )
+    assert completed.returncode == 2
+    assert message in completed.stderr
+    assert "Traceback" not in completed.stderr
