@@ -22,6 +22,9 @@ def test_a_late_tick_is_a_stall_and_the_next_one_is_not() -> None:
     assert detector.stalled(12.6)  # not running for about 2.1 s
     assert not detector.stalled(13.1)
     assert detector.stalls == 1
+    assert detector.last_stall_s == pytest.approx(2.6)  # the gap between the ticks
+    assert detector.stalled(17.0)  # a later, longer stall replaces it
+    assert detector.last_stall_s == pytest.approx(3.9)
 
 
 def test_a_stall_before_the_first_tick_counts_from_the_timer_s_start() -> None:

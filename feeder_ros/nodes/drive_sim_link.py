@@ -53,6 +53,11 @@ class SimLink:
         """This node's own stalls seen so far (for its diagnostics)."""
         return self._stalls.stalls
 
+    @property
+    def last_stall_s(self) -> float:
+        """The last of them: the gap between its control ticks (s)."""
+        return self._stalls.last_stall_s
+
     def tick(self) -> None:
         """Once per control tick, before the backend's status is read."""
         if self._stalls.resuming(time.monotonic()):

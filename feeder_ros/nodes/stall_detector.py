@@ -54,6 +54,7 @@ class StallDetector:
         self._reported = False
         self._catch_up_end = -math.inf
         self.stalls = 0  #: stalls reported so far (for the node's diagnostics)
+        self.last_stall_s = 0.0  #: the last reported stall's gap between ticks (s)
 
     def stalled(self, now_s: float) -> bool:
         """Whether the process stalled before the tick at ``now_s`` (a steady clock, seconds)."""
@@ -62,6 +63,7 @@ class StallDetector:
         if gap > self.period_s + self.slack_s and not self._reported:
             self._reported = True
             self.stalls += 1
+            self.last_stall_s = gap
             self._catch_up_end = now_s + self.catch_up_s
             return True
         self._reported = False

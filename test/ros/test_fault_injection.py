@@ -200,19 +200,22 @@ def _within(seen: Seen, name: str, since: float, limit_s: float, predicate: Any)
 def _reported_in_time(
     seen: Seen, name: str, killed: float, limit_s: float, timeout_s: float, predicate: Any
 ) -> None:
-    """Status ``name`` met ``predicate`` within ``limit_s`` of the kill, plus, for each stall
-    of its own the node reported meanwhile (``stalls_seen``), the middleware's catch-up and the
-    input timeout it then counts again (see StallDetector): a loaded machine may stall a node,
-    and silence heard across its own stall is not the input's."""
-    per_stall_s = MIDDLEWARE_CATCH_UP_S + timeout_s
-    after = _within(seen, name, killed, limit_s + 2 * per_stall_s, predicate)
+    """Status ``name`` met ``predicate`` within ``limit_s`` of the kill, plus, for each stall of
+    its own the node reported (``stalls_seen``) that can reach past the kill, the stall
+    (``last_stall_s``), the middleware's catch-up after it and the input timeout it then counts
+    again (see StallDetector): a loaded machine may stall a node, and silence heard across its
+    own stall is not the input's. A stall up to a catch-up before the kill still delays the
+    count, so the stalls are counted from the last status heard before then."""
+    after = _within(seen, name, killed, limit_s + 3 * (MIDDLEWARE_CATCH_UP_S + 2.0), predicate)
     with seen.lock:
         entries = list(seen.diagnostics[name])
-    earlier = [values for t, _, _, values in entries if t < killed]
+    before = [values for t, _, _, values in entries if t < killed - MIDDLEWARE_CATCH_UP_S]
     reported = next(
         values for t, *rest, values in entries if t >= killed and predicate(*rest, values)
     )
-    stalls = int(reported["stalls_seen"]) - int(earlier[-1].get("stalls_seen", 0) if earlier else 0)
+    stalls = int(reported["stalls_seen"]) - int(before[-1].get("stalls_seen", 0) if before else 0)
+    # with several stalls, each is taken as long as the last
+    per_stall_s = float(reported["last_stall_s"]) + MIDDLEWARE_CATCH_UP_S + timeout_s
     assert after <= limit_s + stalls * per_stall_s, (
         f"{name}: reported {after:.2f} s after the kill, {stalls} stall(s) of its own: {reported}"
     )
