@@ -25,6 +25,7 @@ def test_a_late_tick_is_a_stall_and_the_next_one_is_not() -> None:
     assert detector.last_stall_s == pytest.approx(2.6)  # the gap between the ticks
     assert detector.stalled(17.0)  # a later, longer stall replaces it
     assert detector.last_stall_s == pytest.approx(3.9)
+    assert detector.diagnostic_values() == {"stalls_seen": "2", "last_stall_s": "3.900"}
 
 
 def test_a_stall_before_the_first_tick_counts_from_the_timer_s_start() -> None:

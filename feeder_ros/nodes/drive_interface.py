@@ -491,8 +491,7 @@ class DriveInterface(DriveServices, LifecycleNode):
             **self._amplitude.diagnostics(),
         }
         if self._sim_link is not None:  # silence after its own stall counts later
-            values["stalls_seen"] = str(self._sim_link.stalls)
-            values["last_stall_s"] = f"{self._sim_link.last_stall_s:.3f}"
+            values.update(self._sim_link.stalls.diagnostic_values())
         if tracked is not None:
             feedback = (
                 f"{self.resolve_topic_name(self._values['tracking.feedback_topic'])} "

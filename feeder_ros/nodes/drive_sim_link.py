@@ -49,14 +49,9 @@ class SimLink:
         )
 
     @property
-    def stalls(self) -> int:
-        """This node's own stalls seen so far (for its diagnostics)."""
-        return self._stalls.stalls
-
-    @property
-    def last_stall_s(self) -> float:
-        """The last of them: the gap between its control ticks (s)."""
-        return self._stalls.last_stall_s
+    def stalls(self) -> StallDetector:
+        """This node's own stalls (for its diagnostics)."""
+        return self._stalls
 
     def tick(self) -> None:
         """Once per control tick, before the backend's status is read."""

@@ -322,8 +322,7 @@ class SpeedMonitorNode(Node):
             "feed_rate_ppm": f"{status.feed_rate_ppm:.3f}",
             "alarms": str(status.alarms),
             **status.details,
-            "stalls_seen": str(self._stalls.stalls),
-            "last_stall_s": f"{self._stalls.last_stall_s:.3f}",
+            **self._stalls.diagnostic_values(),
         }
         name = f"{self.get_fully_qualified_name()}: part speed"
         diagnostic = diagnostic_status(name, status.level, status.message, "feeder track", values)

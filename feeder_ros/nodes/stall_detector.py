@@ -56,6 +56,10 @@ class StallDetector:
         self.stalls = 0  #: stalls reported so far (for the node's diagnostics)
         self.last_stall_s = 0.0  #: the last reported stall's gap between ticks (s)
 
+    def diagnostic_values(self) -> dict[str, str]:
+        """The stalls seen so far and the last one's gap, as a node's diagnostic key values."""
+        return {"stalls_seen": str(self.stalls), "last_stall_s": f"{self.last_stall_s:.3f}"}
+
     def stalled(self, now_s: float) -> bool:
         """Whether the process stalled before the tick at ``now_s`` (a steady clock, seconds)."""
         gap = now_s - self._last

@@ -335,8 +335,7 @@ class VehicleEstimatorNode(Node):
             "mean_speed_uncertainty_mps": f"{record.mean_speed_uncertainty_mps:.3g}",
             "mean_speed_confidence": f"{record.mean_speed_confidence:.3f}",
             "slip_fraction": f"{record.slip_fraction:.4g}",
-            "stalls_seen": str(self._stalls.stalls),
-            "last_stall_s": f"{self._stalls.last_stall_s:.3f}",
+            **self._stalls.diagnostic_values(),
         }
         name = self.get_fully_qualified_name()
         status = diagnostic_status(
