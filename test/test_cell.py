@@ -12,7 +12,7 @@ from pathlib import Path
 
 import pytest
 import yaml
-from ros_test_tools import probe_node, wait_until
+from ros_test_tools import DrainedProcess, probe_node, wait_until
 from simulator_process import manual_cell_file
 from stuck_code import TEARDOWN_TIMEOUT_TEXT, stuck_teardown_script
 
@@ -20,6 +20,8 @@ from feeder_ros.cell import CellError, load_cell, parameters_document
 from feeder_ros.cli import cell as cell_command
 from feeder_ros.cli.cell import node_executables
 from feeder_ros.cli.main import main
+from feeder_ros.msg import DriveCommand
+from feeder_ros.nodes.manual_drive import COMMAND_QOS
 
 BIN = Path(sys.executable).parent
 CONFIG = Path(__file__).resolve().parents[1] / "config"
@@ -126,15 +128,24 @@ def _alive(pid: int) -> bool:
     return stat.exists() and stat.read_text().split()[2] != "Z"
 
 
+def _describe(pids: set[int]) -> str:
+    """What each process still alive is and where it waits (for a failure's message)."""
+    lines = []
+    for pid in sorted(pids):
+        try:
+            command = Path(f"/proc/{pid}/cmdline").read_bytes().replace(b"\0", b" ").decode()
+            state = Path(f"/proc/{pid}/stat").read_text().split()[2]
+            waits = Path(f"/proc/{pid}/wchan").read_text()
+        except OSError:
+            continue  # ended meanwhile
+        lines.append(f"pid {pid} state {state} waits in {waits or '-'}: {command}")
+    return "\n".join(lines)
+
+
 @pytest.mark.parametrize("how", ["ctrl-c", "sigterm", "sigkill"])
 def test_cell_runs_feeders_side_by_side_and_leaves_no_orphans(tmp_path: Path, how: str) -> None:
     cell_file = _two_feeders(tmp_path)
-    process = subprocess.Popen(
-        [str(BIN / "feeder"), "cell", "--config", str(cell_file)],
-        stdout=subprocess.PIPE,
-        stderr=subprocess.STDOUT,
-        text=True,
-    )
+    process = DrainedProcess([str(BIN / "feeder"), "cell", "--config", str(cell_file)])
     try:
         with probe_node() as node:
 
@@ -157,14 +168,16 @@ def test_cell_runs_feeders_side_by_side_and_leaves_no_orphans(tmp_path: Path, ho
         assert len(children) == 4
         if how in ("ctrl-c", "sigterm"):  # SIGTERM: as a service manager (or the demo) stops it
             process.send_signal(signal.SIGINT if how == "ctrl-c" else signal.SIGTERM)
-            output, _ = process.communicate(timeout=30)
+            process.wait(timeout=30)
+            output = process.output()
             assert process.returncode == 0, output
             assert "[cell] stopping" in output
         else:
             process.kill()  # the supervisor dies without cleaning up ...
             process.wait(timeout=10)
         # ... and still no node survives it
-        assert wait_until(lambda: not any(_alive(pid) for pid in children), 30.0)
+        gone = wait_until(lambda: not any(_alive(pid) for pid in children), 30.0)
+        assert gone, _describe(children) + "\n" + process.output()
     finally:
         if process.poll() is None:
             process.kill()
@@ -245,24 +258,21 @@ def test_a_cell_waits_out_a_nodes_stuck_teardown_and_names_it(tmp_path: Path) ->
     (site / "sitecustomize.py").write_text(CHILD_WITH_A_STUCK_TEARDOWN)
     env = dict(os.environ, PYTHONPATH=str(site), STUCK_SCRIPT=str(stuck))
     config = manual_cell_file(tmp_path / "cell.yaml", "stuck_cell", ["/stuck/feeder_1"])
-    process = subprocess.Popen(
-        [str(BIN / "feeder"), "cell", "--config", str(config)],
-        stdout=subprocess.PIPE,
-        stderr=subprocess.STDOUT,
-        text=True,
-        env=env,
-    )
+    process = DrainedProcess([str(BIN / "feeder"), "cell", "--config", str(config)], env=env)
     try:
         with probe_node() as node:
-
-            def up() -> bool:
-                return ("manual_drive", "/stuck/feeder_1") in node.get_node_names_and_namespaces()
-
-            assert wait_until(up, 60.0), node.get_node_names_and_namespaces()
+            # its commands on the wire: the node is built and spinning (a node shows in the
+            # graph while it is still being built, and a stop then never reaches its teardown)
+            commands: list[DriveCommand] = []
+            node.create_subscription(
+                DriveCommand, "/stuck/feeder_1/drive/command", commands.append, COMMAND_QOS
+            )
+            assert wait_until(lambda: len(commands) > 0, 60.0), process.output()
         start = time.monotonic()
         process.send_signal(signal.SIGINT)
-        output, _ = process.communicate(timeout=30)
+        process.wait(timeout=30)
         took = time.monotonic() - start
+        output = process.output()
     finally:
         if process.poll() is None:
             process.kill()
