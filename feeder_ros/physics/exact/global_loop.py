@@ -260,19 +260,10 @@ def _event_loop(
             counters[2] = STATUS_STUCK
             return STATUS_STUCK
         kind = fn.kind[hit]
-        if kind <= F_SLIDE_BWD:
-            # the carrier's own event: a stiffness branch or the end of a sliding hold
-            state[S_X], state[S_V], state[S_MODE], ev = _carrier_event(
-                kind, switch, mode, xe, ve, Fe, dFe, F0, m, kf, kb
-            )
-            if ev >= 0 and log_events:
-                _log(ev_t, ev_kind, ev_part, counters, te, ev, -1)
-        else:
-            carrier = (xe, ve, ae, Fe, F0, c, k, m)
-            _part_event(
-                kind, fn.group[hit], te, carrier, two_way and not held, lmin, groups, members,
-                log_buffer, log_events,
-            )  # fmt: skip
+        _event_at(
+            kind, fn.group[hit], te, (xe, ve, ae, Fe, dFe), (switch, mode, F0, m, c, k, kf, kb),
+            two_way and not held, lmin, state, groups, members, log_buffer, log_events,
+        )  # fmt: skip
         if not two_way and not record and kind >= F_STICK_UP:
             # a part event: the carrier's piece goes on from here
             cont = True
@@ -472,6 +463,26 @@ def _search_global(
                     f_skip[i] = 0.0
         tau = t_next
         counters[3] += 1
+
+
+@njit(cache=True, inline="always")
+def _event_at(kind, g, te, end, branch, coupled, lmin, state, gr, mb, log, log_events):
+    """The event ``kind`` at ``te`` (group ``g``'s, if a part's), the carrier's end of piece
+    there ``end`` = (x, v, a, F, dF) on ``branch`` = (switch mode, its mode, F0, m, c, k, kf,
+    kb): the carrier's own (a stiffness branch or the end of a sliding hold; its new state in
+    ``state``) or a part's (:func:`_part_event`). Logged to ``log`` when ``log_events``."""
+    xe, ve, ae, Fe, dFe = end
+    switch, mode, F0, m, c, k, kf, kb = branch
+    if kind <= F_SLIDE_BWD:
+        state[S_X], state[S_V], state[S_MODE], ev = _carrier_event(
+            kind, switch, mode, xe, ve, Fe, dFe, F0, m, kf, kb
+        )
+        if ev >= 0 and log_events:
+            ev_t, ev_kind, ev_part, counters = log
+            _log(ev_t, ev_kind, ev_part, counters, te, ev, -1)
+    else:
+        carrier = (xe, ve, ae, Fe, F0, c, k, m)
+        _part_event(kind, g, te, carrier, coupled, lmin, gr, mb, log, log_events)
 
 
 @njit(cache=True, inline="always")
