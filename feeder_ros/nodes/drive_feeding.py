@@ -68,8 +68,8 @@ class _Goal:
 
 
 class Feeding:
-    """Level control and feed_parts for ``node`` (a DriveInterface); ``speed_mps`` is set by the
-    node from its speed feedback (NaN when none)."""
+    """Level control and feed_parts for ``node`` (a DriveInterface); ``speed_mps`` is the last
+    part speed of the node's speed feedback (:meth:`set_speed`; NaN when none)."""
 
     def __init__(self, node: Node, values: dict[str, Any]) -> None:
         self._node = node
@@ -93,6 +93,9 @@ class Feeding:
         )
 
     # -- lifecycle ---------------------------------------------------------------------------------
+    def set_speed(self, speed_mps: float) -> None:
+        self.speed_mps = speed_mps
+
     def configure(self, controller: DriveController, level: LevelControl) -> None:
         self._controller = controller
         self._level = level

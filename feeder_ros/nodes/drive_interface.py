@@ -16,7 +16,8 @@ and moves the frequency onto the measured part-speed peak (square frequency dith
 seeking) while trimming the amplitude to hold the target speed, from the part speed on
 ``tracking.feedback_topic`` (the estimator's ``estimate`` or the speed monitor's ``speed/status``).
 When it runs and how its set points reach the controller is
-:class:`feeder_ros.drive.tracked_control.TrackedControl` (ROS-free). Stale feedback holds the
+:class:`feeder_ros.drive.tracked_control.TrackedControl` (ROS-free), the readings' subscription
+:mod:`feeder_ros.nodes.drive_tracking_feedback`. Stale feedback holds the
 tracked centre frequency and amplitude and is reported in ``/diagnostics`` (WARN) and
 ``drive/state`` (``status`` = TRACKING_HOLD). The diagnostics' level and summary are
 :func:`feeder_ros.drive.health.drive_health`.
@@ -48,7 +49,7 @@ from feeder_ros.drive.health import Level, drive_health, drive_values
 from feeder_ros.drive.level_control import LevelControl
 from feeder_ros.drive.limits import DriveLimits, Outcome
 from feeder_ros.drive.modbus import ModbusTcpBackend
-from feeder_ros.drive.resonance_tracker import FUTURE_STAMP_TOLERANCE_S, TrackerMode
+from feeder_ros.drive.resonance_tracker import TrackerMode
 from feeder_ros.drive.speed_model import SpeedModel
 from feeder_ros.drive.speed_model_source import (
     SpeedModelSource,
@@ -57,7 +58,6 @@ from feeder_ros.drive.speed_model_source import (
 )
 from feeder_ros.drive.tracked_control import TrackedControl, apply_loop_point
 from feeder_ros.msg import DriveState as DriveStateMsg
-from feeder_ros.msg import SpeedStatus, VehicleEstimate
 from feeder_ros.nodes.diagnostics import diagnostic_array, diagnostic_status
 from feeder_ros.nodes.drive_amplitude import AmplitudeShell
 from feeder_ros.nodes.drive_feeding import Feeding
@@ -79,8 +79,9 @@ from feeder_ros.nodes.drive_interface_parameters import (
 from feeder_ros.nodes.drive_services import DriveServices
 from feeder_ros.nodes.drive_sim_link import SimLink
 from feeder_ros.nodes.drive_speed_feedback import SpeedFeedback
+from feeder_ros.nodes.drive_tracking_feedback import TrackingFeedback
 from feeder_ros.nodes.ros_parameters import declare_parameters, validator
-from feeder_ros.nodes.ros_time import clock_seconds, stamp_seconds
+from feeder_ros.nodes.ros_time import clock_seconds
 from feeder_ros.nodes.runner import run_node
 from feeder_ros.physics.parameters import FeederParameters
 
@@ -117,9 +118,6 @@ def check_combination(values: dict[str, Any]) -> None:
         )
 
 
-FEEDBACK_QOS = QoSProfile(depth=100, reliability=ReliabilityPolicy.RELIABLE)
-
-
 class DriveInterface(DriveServices, LifecycleNode):
     def __init__(self, **kwargs: Any) -> None:
         super().__init__(INTERFACE.node_name, **kwargs)
@@ -140,7 +138,7 @@ class DriveInterface(DriveServices, LifecycleNode):
         self._speed_source = "none"
         self._loop_timers: list[Any] = []
         self._tracked: TrackedControl | None = None
-        self._feedback_sub: Any = None
+        self._tracking_feedback: TrackingFeedback | None = None
         self._sim_link: SimLink | None = None  # sim backend: drive/command and parts/state
         self._speed_feedback = SpeedFeedback(self, self._values, self._apply_point)
         self._last_output = DriveOutput(False, 0.0, 0.0, 0.0)
@@ -249,14 +247,9 @@ class DriveInterface(DriveServices, LifecycleNode):
         )
         self._tracked = TrackedControl(tracker_settings_from(values), limits, self._log)
         self._tracked.enabled = bool(values["tracking.enabled"])
-        if values["tracking.feedback_type"] == "vehicle_estimate":
-            self._feedback_sub = self.create_subscription(
-                VehicleEstimate, values["tracking.feedback_topic"], self._on_estimate, FEEDBACK_QOS
-            )
-        else:
-            self._feedback_sub = self.create_subscription(
-                SpeedStatus, values["tracking.feedback_topic"], self._on_speed_status, FEEDBACK_QOS
-            )
+        self._tracking_feedback = TrackingFeedback(
+            self, self._tracked, self._values, self._feeding.set_speed
+        )
         self._period_s = 1.0 / values["publish_rate_hz"]
         self._loop_timers = [self.create_timer(self._period_s, self._tick)]
         self.get_logger().info(
@@ -316,9 +309,9 @@ class DriveInterface(DriveServices, LifecycleNode):
         self._speed_feedback.teardown()
         self._feeding.teardown(self._now())
         self._amplitude.teardown()
-        if self._feedback_sub is not None:
-            self.destroy_subscription(self._feedback_sub)
-            self._feedback_sub = None
+        if self._tracking_feedback is not None:
+            self._tracking_feedback.close()
+            self._tracking_feedback = None
         if self._controller is not None:
             self._controller.emergency_stop(self._now(), "shutting down")
             self._controller = None
@@ -433,34 +426,6 @@ class DriveInterface(DriveServices, LifecycleNode):
         answer = apply_loop_point(controller, now, frequency_hz, amplitude_percent)
         if answer.outcome is Outcome.REFUSED:
             self._log("repeating", f"{who} set point refused: {answer.reason}")
-
-    def _on_estimate(self, message: VehicleEstimate) -> None:
-        if self._tracked is None:
-            return
-        if not message.mean_speed_confidence >= self._values["tracking.min_confidence"]:
-            return  # an estimate without enough information is no reading
-        self._feedback(message.header.stamp, message.mean_speed_mps, "estimate")
-
-    def _on_speed_status(self, message: SpeedStatus) -> None:
-        if self._tracked is None:
-            return
-        self._feedback(message.header.stamp, message.estimated_speed_mps, "speed_status")
-
-    def _feedback(self, stamp: Any, speed_mps: float, topic: str) -> None:
-        """A speed reading for the tracker; one stamped far ahead of this node's clock is ignored
-        (by the tracker) with a warning: it would keep tracking ACTIVE with no fresh reading."""
-        assert self._tracked is not None
-        self._feeding.speed_mps = speed_mps
-        now = self._now()
-        t_s = stamp_seconds(stamp) or now
-        if t_s > now + FUTURE_STAMP_TOLERANCE_S and math.isfinite(speed_mps):
-            self.get_logger().warning(
-                f"{topic} stamped {t_s:.3f} s, {t_s - now:.3g} s ahead of this node's clock "
-                f"(over {FUTURE_STAMP_TOLERANCE_S:g} s): ignored by resonance tracking; do both "
-                "nodes use the same clock (use_sim_time)?",
-                throttle_duration_sec=5.0,
-            )
-        self._tracked.feedback(t_s, speed_mps)
 
     def _publish_diagnostics(self) -> None:
         controller, backend = self._controller, self._backend
