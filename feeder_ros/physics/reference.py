@@ -40,74 +40,96 @@ def reference_simulate(
 ) -> SimulationResult:
     """Simulate like :func:`~feeder_ros.physics.simulation.simulate` (sharp model) with DOP853."""
     drive = drive or DriveSchedule(params.drive_frequency_hz, params.drive_amplitude_n)
-    seg = drive.segments()
-    n_out = math.floor(duration_s * output_rate_hz * (1.0 + 1e-12))
-    samples = np.arange(n_out + 1, dtype=np.float64) / output_rate_hz
-    cos_t = params.cos_theta
-    kf = params.forward_stiffness_n_per_m * cos_t
-    kb = params.backward_stiffness_n_per_m * cos_t
-    c = params.damping_ns_per_m
-    two_way = params.coupling == "two_way"
-    velocity_switch = params.stiffness_switch == "velocity"
-    kg = params.gravity_mps2 * params.friction_multiplier
-    N = len(parts)
-    res = [spec.resolved(params) for spec in parts]
-    mass_p = np.array([r[0] for r in res])
-    L = np.array([r[1] * kg for r in res])
-    D = np.array([r[2] * kg for r in res])
-    phase = np.zeros(N, dtype=np.int64)  # Phase codes; -1 exited
-    track = params.track_length_m
-    y = np.zeros(2 + 2 * N)
-    for i, spec in enumerate(parts):
-        y[2 + 2 * i] = spec.position_m
-    mode = 1  # +1, -1, 0 held
-    slip_time = np.zeros(N)
-    exit_t = np.full(N, np.nan)
-    end_x = np.full(N, np.nan)
+    run = _ReferenceRun(params, drive, duration_s, output_rate_hz, parts)
+    run.integrate(duration_s, rtol, atol)
+    return run.result(duration_s, parts)
 
-    def carrier_mass_force() -> tuple[float, float]:
-        if not two_way:
+
+class _ReferenceRun:
+    """The state of one reference run: carrier and parts in one ODE state ``y``, the carrier's
+    stiffness mode, the parts' phases, the event log and the output arrays."""
+
+    def __init__(
+        self,
+        params: FeederParameters,
+        drive: DriveSchedule,
+        duration_s: float,
+        output_rate_hz: float,
+        parts: Sequence[PartSpec],
+    ) -> None:
+        self.params = params
+        self.seg = drive.segments()
+        self.n_out = math.floor(duration_s * output_rate_hz * (1.0 + 1e-12))
+        self.samples = np.arange(self.n_out + 1, dtype=np.float64) / output_rate_hz
+        cos_t = params.cos_theta
+        self.kf = params.forward_stiffness_n_per_m * cos_t
+        self.kb = params.backward_stiffness_n_per_m * cos_t
+        self.c = params.damping_ns_per_m
+        self.two_way = params.coupling == "two_way"
+        self.velocity_switch = params.stiffness_switch == "velocity"
+        kg = params.gravity_mps2 * params.friction_multiplier
+        self.N = N = len(parts)
+        res = [spec.resolved(params) for spec in parts]
+        self.mass_p = np.array([r[0] for r in res])
+        self.L = np.array([r[1] * kg for r in res])
+        self.D = np.array([r[2] * kg for r in res])
+        self.phase = np.zeros(N, dtype=np.int64)  # Phase codes; -1 exited
+        self.track = params.track_length_m
+        self.y = np.zeros(2 + 2 * N)
+        for i, spec in enumerate(parts):
+            self.y[2 + 2 * i] = spec.position_m
+        self.mode = 1  # +1, -1, 0 held
+        self.slip_time = np.zeros(N)
+        self.exit_t = np.full(N, np.nan)
+        self.end_x = np.full(N, np.nan)
+        self.ev_t: list[float] = []
+        self.ev_k: list[int] = []
+        self.ev_p: list[int] = []
+        n = self.n_out + 1
+        self.out: dict[str, npt.NDArray[Any]] = {
+            "cx": np.zeros(n),
+            "cv": np.zeros(n),
+            "ca": np.zeros(n),
+            "cb": np.zeros(n, np.int8),
+            "px": np.zeros((n, N)),
+            "pv": np.zeros((n, N)),
+            "pp": np.zeros((n, N), np.int8),
+        }
+
+    def carrier_mass_force(self) -> tuple[float, float]:
+        params, phase = self.params, self.phase
+        if not self.two_way:
             return params.equivalent_mass_kg, 0.0
         m = params.carrier_mass_kg + params.mass_coefficient * params.plate_mass_kg
         r = 0.0
-        for i in range(N):
+        for i in range(self.N):
             if phase[i] == Phase.STICK:
-                m += mass_p[i]
+                m += self.mass_p[i]
             elif phase[i] == Phase.SLIP_BACKWARD:
-                r -= mass_p[i] * D[i]
+                r -= self.mass_p[i] * self.D[i]
             elif phase[i] == Phase.SLIP_FORWARD:
-                r += mass_p[i] * D[i]
+                r += self.mass_p[i] * self.D[i]
         return m, r
 
-    def force(t: float) -> float:
-        return float(seg.force(t))
-
-    def accel(t: float, x: float, v: float, m: float, r: float) -> float:
-        if mode == 0:
+    def accel(self, t: float, x: float, v: float, m: float, r: float) -> float:
+        if self.mode == 0:
             return 0.0
-        k = kf if mode > 0 else kb
-        return (force(t) + r - c * v - k * x) / m
+        k = self.kf if self.mode > 0 else self.kb
+        return (float(self.seg.force(t)) + r - self.c * v - k * x) / m
 
-    ev_t: list[float] = []
-    ev_k: list[int] = []
-    ev_p: list[int] = []
-    out: dict[str, npt.NDArray[Any]] = {
-        "cx": np.zeros(n_out + 1),
-        "cv": np.zeros(n_out + 1),
-        "ca": np.zeros(n_out + 1),
-        "cb": np.zeros(n_out + 1, np.int8),
-        "px": np.zeros((n_out + 1, N)),
-        "pv": np.zeros((n_out + 1, N)),
-        "pp": np.zeros((n_out + 1, N), np.int8),
-    }
+    def log(self, t: float, kind: int, part: int) -> None:
+        self.ev_t.append(t)
+        self.ev_k.append(kind)
+        self.ev_p.append(part)
 
-    def record(j: int, t: float) -> None:
-        m, r = carrier_mass_force()
+    def record(self, j: int, t: float) -> None:
+        out, y, phase = self.out, self.y, self.phase
+        m, r = self.carrier_mass_force()
         out["cx"][j] = y[0]
         out["cv"][j] = y[1]
-        out["ca"][j] = accel(t, y[0], y[1], m, r)
-        out["cb"][j] = mode
-        for i in range(N):
+        out["ca"][j] = self.accel(t, y[0], y[1], m, r)
+        out["cb"][j] = self.mode
+        for i in range(self.N):
             if phase[i] < 0:
                 out["px"][j, i] = np.nan
                 out["pv"][j, i] = np.nan
@@ -117,222 +139,242 @@ def reference_simulate(
                 out["pv"][j, i] = y[3 + 2 * i]
                 out["pp"][j, i] = phase[i]
 
-    # stops: sample times, drive boundaries, end
-    stops = np.union1d(samples, seg.start_s[(seg.start_s > 0) & (seg.start_s < duration_s)])
-    t = 0.0
-    j_out = 0
-    if samples[0] == 0.0:
-        record(0, 0.0)
-        j_out = 1
-    m0, r0 = carrier_mass_force()
-    a0 = accel(0.0, y[0], y[1], m0, r0)
-    for i in range(N):
-        if abs(a0) > L[i]:
-            phase[i] = Phase.SLIP_BACKWARD if a0 > 0 else Phase.SLIP_FORWARD
-    stop_index = int(np.searchsorted(stops, 0.0, side="right"))
-    guard = 0
-    while stop_index < len(stops):
-        t_stop = float(stops[stop_index])
-        # a stick condition already violated at a restart (the acceleration jumped): slip now
-        for _ in range(N):
-            m, r = carrier_mass_force()
-            a_now = accel(t, y[0], y[1], m, r)
-            over = [i for i in range(N) if phase[i] == Phase.STICK and abs(a_now) > L[i]]
+    def slip_where_violated(self, t: float) -> None:
+        """A stick condition already violated at a restart (the acceleration jumped): slip now."""
+        for _ in range(self.N):
+            m, r = self.carrier_mass_force()
+            a_now = self.accel(t, self.y[0], self.y[1], m, r)
+            over = [
+                i for i in range(self.N) if self.phase[i] == Phase.STICK and abs(a_now) > self.L[i]
+            ]
             if not over:
                 break
             for i in over:
-                phase[i] = Phase.SLIP_BACKWARD if a_now > 0 else Phase.SLIP_FORWARD
-                ev_t.append(t)
-                ev_k.append(EventKind.SLIP_START)
-                ev_p.append(i)
-        m, r = carrier_mass_force()
-        mode_now = mode
-        k = kf if mode_now >= 0 else kb
-        kseg = seg.index_at(t)
-        amp_k, om_k = float(seg.amplitude_n[kseg]), float(seg.omega_rad_s[kseg])
-        ph_k, st_k = float(seg.phase_rad[kseg]), float(seg.start_s[kseg])
+                self.phase[i] = Phase.SLIP_BACKWARD if a_now > 0 else Phase.SLIP_FORWARD
+                self.log(t, EventKind.SLIP_START, i)
 
-        def force_k(tt: float) -> float:
-            return amp_k * math.sin(ph_k + om_k * (tt - st_k))  # noqa: B023
-
-        def rhs(tt: float, yy: F64, m: float = m, r: float = r, k: float = k) -> F64:
-            dy = np.empty_like(yy)
-            if mode_now == 0:  # noqa: B023
-                a = 0.0
-                dy[0] = 0.0
+    def integrate(self, duration_s: float, rtol: float, atol: float) -> None:
+        """From 0 to ``duration_s``: pieces between stops (samples, drive changes), each cut at
+        its first event, the integrator restarted after each."""
+        seg, samples, n_out = self.seg, self.samples, self.n_out
+        stops = np.union1d(samples, seg.start_s[(seg.start_s > 0) & (seg.start_s < duration_s)])
+        t = 0.0
+        j_out = 0
+        if samples[0] == 0.0:
+            self.record(0, 0.0)
+            j_out = 1
+        m0, r0 = self.carrier_mass_force()
+        a0 = self.accel(0.0, self.y[0], self.y[1], m0, r0)
+        for i in range(self.N):
+            if abs(a0) > self.L[i]:
+                self.phase[i] = Phase.SLIP_BACKWARD if a0 > 0 else Phase.SLIP_FORWARD
+        stop_index = int(np.searchsorted(stops, 0.0, side="right"))
+        guard = 0
+        while stop_index < len(stops):
+            t_stop = float(stops[stop_index])
+            self.slip_where_violated(t)
+            rhs, events, tags, force_k = _piece(self, t)
+            sol = solve_ivp(
+                rhs, (t, t_stop), self.y, method="DOP853", rtol=rtol, atol=atol, events=events
+            )
+            if sol.status == -1:
+                raise RuntimeError("solve_ivp failed: " + sol.message)
+            for i in range(self.N):
+                if self.phase[i] > 0:
+                    self.slip_time[i] += sol.t[-1] - t
+            self.y = sol.y[:, -1].copy()
+            t_new = float(sol.t[-1])
+            if sol.status == 1:
+                # which event fired
+                assert sol.t_events is not None
+                assert sol.y_events is not None
+                which = next(n for n, te in enumerate(sol.t_events) if len(te))
+                kind, i = tags[which]
+                t_new = float(sol.t_events[which][0])
+                self.y = sol.y_events[which][0].copy()
+                self.event(kind, i, t_new, force_k(t_new))
+                guard = guard + 1 if t_new == t else 0
+                if guard > 100:
+                    raise RuntimeError(f"reference stuck at t={t_new}")
             else:
-                a = (force_k(tt) + r - c * yy[1] - k * yy[0]) / m
-                dy[0] = yy[1]
-            dy[1] = a
-            for i in range(N):
-                dy[2 + 2 * i] = yy[3 + 2 * i]
-                if phase[i] == Phase.STICK:
-                    dy[3 + 2 * i] = a
-                elif phase[i] == Phase.SLIP_BACKWARD:
-                    dy[3 + 2 * i] = D[i]
-                elif phase[i] == Phase.SLIP_FORWARD:
-                    dy[3 + 2 * i] = -D[i]
+                if t_stop in seg.start_s:
+                    kseg = int(np.searchsorted(seg.start_s, t_stop))
+                    if seg.logged[kseg]:
+                        self.log(t_stop, EventKind.DRIVE_CHANGE, -1)
+                stop_index += 1
+            t = t_new
+            if t == t_stop or sol.status == 0:
+                t = t_stop
+                while j_out <= n_out and samples[j_out] <= t:
+                    if samples[j_out] == t:
+                        self.record(j_out, t)
+                    j_out += 1
+
+    def event(self, kind: str, i: int, t_new: float, F: float) -> None:
+        """The event ``kind`` (part ``i``'s, if a part's) at ``t_new``, the drive force ``F``
+        there: the carrier's mode, a part's phase, the state ``y`` changed and the event logged."""
+        y, phase, mass_p, D, L = self.y, self.phase, self.mass_p, self.D, self.L
+        kf, kb = self.kf, self.kb
+        m, r = self.carrier_mass_force()
+        if kind == "branch":
+            if self.velocity_switch:
+                y[1] = 0.0
+                af = (F + r - kf * y[0]) / m
+                ab = (F + r - kb * y[0]) / m
+                if af > 0 and ab > 0:
+                    new = 1
+                elif af < 0 and ab < 0:
+                    new = -1
+                elif af <= 0 <= ab:
+                    new = 0
                 else:
-                    dy[3 + 2 * i] = 0.0
-            return dy
+                    new = self.mode
+            else:
+                y[0] = 0.0
+                new = -self.mode
+            self.log(t_new, EventKind.SLIDING_START if new == 0 else EventKind.BRANCH_SWITCH, -1)
+            self.mode = new
+        elif kind in ("slide_fwd", "slide_bwd"):
+            self.mode = 1 if kind == "slide_fwd" else -1
+            self.log(t_new, EventKind.SLIDING_END, -1)
+        elif kind in ("up", "down"):
+            phase[i] = Phase.SLIP_BACKWARD if kind == "up" else Phase.SLIP_FORWARD
+            self.log(t_new, EventKind.SLIP_START, i)
+        elif kind == "relvel":
+            y[3 + 2 * i] = y[1]
+            k_now = kf if self.mode >= 0 else kb
+            if self.two_way and self.mode != 0:
+                rs = r + (
+                    mass_p[i] * D[i] if phase[i] == Phase.SLIP_BACKWARD else -mass_p[i] * D[i]
+                )
+                a_test = (F + rs - self.c * y[1] - k_now * y[0]) / (m + mass_p[i])
+            else:
+                a_test = self.accel(t_new, y[0], y[1], m, r)
+            if abs(a_test) <= L[i]:
+                phase[i] = Phase.STICK
+                self.log(t_new, EventKind.STICK, i)
+            else:
+                phase[i] = Phase.SLIP_BACKWARD if a_test > 0 else Phase.SLIP_FORWARD
+                self.log(t_new, EventKind.SLIP_REVERSAL, i)
+        elif kind == "exit":
+            phase[i] = -1
+            self.exit_t[i] = t_new
+            self.end_x[i] = y[2 + 2 * i]
+            self.log(t_new, EventKind.PART_EXIT, i)
 
-        events: list[EventFn] = []
-        tags: list[tuple[str, int]] = []
-
-        def add(fn: EventFn, tag: tuple[str, int]) -> None:
-            fn.terminal = True  # type: ignore[attr-defined]
-            fn.direction = -1  # type: ignore[attr-defined]
-            events.append(fn)  # noqa: B023
-            tags.append(tag)  # noqa: B023
-
-        if mode_now != 0:
-            idx = 1 if velocity_switch else 0
-
-            def branch(tt: float, yy: F64, idx: int = idx, s: float = mode_now) -> float:
-                return float(s * yy[idx])
-
-            add(branch, ("branch", -1))
-        else:
-
-            def slide_fwd(tt: float, yy: F64, r: float = r) -> float:
-                return -(force_k(tt) + r - kf * float(yy[0]))
-
-            def slide_bwd(tt: float, yy: F64, r: float = r) -> float:
-                return force_k(tt) + r - kb * float(yy[0])
-
-            add(slide_fwd, ("slide_fwd", -1))
-            add(slide_bwd, ("slide_bwd", -1))
+    def result(self, duration_s: float, parts: Sequence[PartSpec]) -> SimulationResult:
+        N, y, out = self.N, self.y, self.out
         for i in range(N):
+            if self.phase[i] >= 0:
+                self.end_x[i] = y[2 + 2 * i]
+        start_x = np.array([spec.position_m for spec in parts])
+        return SimulationResult(
+            t_s=self.samples,
+            carrier_x_m=out["cx"],
+            carrier_v_mps=out["cv"],
+            carrier_a_mps2=out["ca"],
+            branch=out["cb"],
+            part_x_m=out["px"],
+            part_v_mps=out["pv"],
+            part_phase=out["pp"],
+            events=EventLog.of(
+                np.array(self.ev_t), np.array(self.ev_k, np.int8), np.array(self.ev_p, np.int64)
+            ),
+            part_start_t_s=np.zeros(N),
+            part_start_x_m=start_x,
+            part_end_t_s=np.where(np.isfinite(self.exit_t), self.exit_t, duration_s),
+            part_end_x_m=self.end_x,
+            part_slip_time_s=self.slip_time,
+            part_exit_t_s=self.exit_t,
+        )
+
+
+def _piece(
+    run: _ReferenceRun, t: float
+) -> tuple[
+    Callable[[float, F64], F64], list[EventFn], list[tuple[str, int]], Callable[[float], float]
+]:
+    """The ODE of the piece starting at ``t`` (the mode, phases and carrier load as they are
+    now), its terminal event functions with their tags, and the drive force in it."""
+    seg, phase, L, D, N = run.seg, run.phase, run.L, run.D, run.N
+    c, kf, kb, track = run.c, run.kf, run.kb, run.track
+    m, r = run.carrier_mass_force()
+    mode_now = run.mode
+    k = kf if mode_now >= 0 else kb
+    kseg = seg.index_at(t)
+    amp_k, om_k = float(seg.amplitude_n[kseg]), float(seg.omega_rad_s[kseg])
+    ph_k, st_k = float(seg.phase_rad[kseg]), float(seg.start_s[kseg])
+
+    def force_k(tt: float) -> float:
+        return amp_k * math.sin(ph_k + om_k * (tt - st_k))
+
+    def rhs(tt: float, yy: F64) -> F64:
+        dy = np.empty_like(yy)
+        if mode_now == 0:
+            a = 0.0
+            dy[0] = 0.0
+        else:
+            a = (force_k(tt) + r - c * yy[1] - k * yy[0]) / m
+            dy[0] = yy[1]
+        dy[1] = a
+        for i in range(N):
+            dy[2 + 2 * i] = yy[3 + 2 * i]
             if phase[i] == Phase.STICK:
+                dy[3 + 2 * i] = a
+            elif phase[i] == Phase.SLIP_BACKWARD:
+                dy[3 + 2 * i] = D[i]
+            elif phase[i] == Phase.SLIP_FORWARD:
+                dy[3 + 2 * i] = -D[i]
+            else:
+                dy[3 + 2 * i] = 0.0
+        return dy
 
-                def up(tt: float, yy: F64, i: int = i) -> float:
-                    return float(L[i] - rhs(tt, yy)[1])
+    events: list[EventFn] = []
+    tags: list[tuple[str, int]] = []
 
-                def down(tt: float, yy: F64, i: int = i) -> float:
-                    return float(L[i] + rhs(tt, yy)[1])
+    def add(fn: EventFn, tag: tuple[str, int]) -> None:
+        fn.terminal = True  # type: ignore[attr-defined]
+        fn.direction = -1  # type: ignore[attr-defined]
+        events.append(fn)
+        tags.append(tag)
 
-                add(up, ("up", i))
-                add(down, ("down", i))
-            elif phase[i] > 0:
-                s = 1.0 if phase[i] == Phase.SLIP_BACKWARD else -1.0
+    if mode_now != 0:
+        idx = 1 if run.velocity_switch else 0
 
-                def relvel(tt: float, yy: F64, i: int = i, s: float = s) -> float:
-                    return float(s * (yy[1] - yy[3 + 2 * i]))
+        def branch(tt: float, yy: F64, idx: int = idx, s: float = mode_now) -> float:
+            return float(s * yy[idx])
 
-                def leave(tt: float, yy: F64, i: int = i) -> float:
-                    return float(track - (yy[2 + 2 * i] - yy[0]))
+        add(branch, ("branch", -1))
+    else:
 
-                add(relvel, ("relvel", i))
-                add(leave, ("exit", i))
-        sol = solve_ivp(rhs, (t, t_stop), y, method="DOP853", rtol=rtol, atol=atol, events=events)
-        if sol.status == -1:
-            raise RuntimeError("solve_ivp failed: " + sol.message)
-        for i in range(N):
-            if phase[i] > 0:
-                slip_time[i] += sol.t[-1] - t
-        y = sol.y[:, -1].copy()
-        t_new = float(sol.t[-1])
-        if sol.status == 1:
-            # which event fired
-            assert sol.t_events is not None
-            assert sol.y_events is not None
-            which = next(n for n, te in enumerate(sol.t_events) if len(te))
-            kind, i = tags[which]
-            t_new = float(sol.t_events[which][0])
-            y = sol.y_events[which][0].copy()
-            m, r = carrier_mass_force()
-            F = force_k(t_new)
-            if kind == "branch":
-                if velocity_switch:
-                    y[1] = 0.0
-                    af = (F + r - kf * y[0]) / m
-                    ab = (F + r - kb * y[0]) / m
-                    if af > 0 and ab > 0:
-                        new = 1
-                    elif af < 0 and ab < 0:
-                        new = -1
-                    elif af <= 0 <= ab:
-                        new = 0
-                    else:
-                        new = mode
-                else:
-                    y[0] = 0.0
-                    new = -mode
-                ev_t.append(t_new)
-                ev_k.append(EventKind.SLIDING_START if new == 0 else EventKind.BRANCH_SWITCH)
-                ev_p.append(-1)
-                mode = new
-            elif kind in ("slide_fwd", "slide_bwd"):
-                mode = 1 if kind == "slide_fwd" else -1
-                ev_t.append(t_new)
-                ev_k.append(EventKind.SLIDING_END)
-                ev_p.append(-1)
-            elif kind in ("up", "down"):
-                phase[i] = Phase.SLIP_BACKWARD if kind == "up" else Phase.SLIP_FORWARD
-                ev_t.append(t_new)
-                ev_k.append(EventKind.SLIP_START)
-                ev_p.append(i)
-            elif kind == "relvel":
-                y[3 + 2 * i] = y[1]
-                k_now = kf if mode >= 0 else kb
-                if two_way and mode != 0:
-                    rs = r + (
-                        mass_p[i] * D[i] if phase[i] == Phase.SLIP_BACKWARD else -mass_p[i] * D[i]
-                    )
-                    a_test = (F + rs - c * y[1] - k_now * y[0]) / (m + mass_p[i])
-                else:
-                    a_test = accel(t_new, y[0], y[1], m, r)
-                if abs(a_test) <= L[i]:
-                    phase[i] = Phase.STICK
-                    ev_k.append(EventKind.STICK)
-                else:
-                    phase[i] = Phase.SLIP_BACKWARD if a_test > 0 else Phase.SLIP_FORWARD
-                    ev_k.append(EventKind.SLIP_REVERSAL)
-                ev_t.append(t_new)
-                ev_p.append(i)
-            elif kind == "exit":
-                phase[i] = -1
-                exit_t[i] = t_new
-                end_x[i] = y[2 + 2 * i]
-                ev_t.append(t_new)
-                ev_k.append(EventKind.PART_EXIT)
-                ev_p.append(i)
-            guard = guard + 1 if t_new == t else 0
-            if guard > 100:
-                raise RuntimeError(f"reference stuck at t={t_new}")
-        else:
-            if t_stop in seg.start_s:
-                kseg = int(np.searchsorted(seg.start_s, t_stop))
-                if seg.logged[kseg]:
-                    ev_t.append(t_stop)
-                    ev_k.append(EventKind.DRIVE_CHANGE)
-                    ev_p.append(-1)
-            stop_index += 1
-        t = t_new
-        if t == t_stop or sol.status == 0:
-            t = t_stop
-            while j_out <= n_out and samples[j_out] <= t:
-                if samples[j_out] == t:
-                    record(j_out, t)
-                j_out += 1
+        def slide_fwd(tt: float, yy: F64) -> float:
+            return -(force_k(tt) + r - kf * float(yy[0]))
+
+        def slide_bwd(tt: float, yy: F64) -> float:
+            return force_k(tt) + r - kb * float(yy[0])
+
+        add(slide_fwd, ("slide_fwd", -1))
+        add(slide_bwd, ("slide_bwd", -1))
     for i in range(N):
-        if phase[i] >= 0:
-            end_x[i] = y[2 + 2 * i]
-    start_x = np.array([spec.position_m for spec in parts])
-    return SimulationResult(
-        t_s=samples,
-        carrier_x_m=out["cx"],
-        carrier_v_mps=out["cv"],
-        carrier_a_mps2=out["ca"],
-        branch=out["cb"],
-        part_x_m=out["px"],
-        part_v_mps=out["pv"],
-        part_phase=out["pp"],
-        events=EventLog.of(np.array(ev_t), np.array(ev_k, np.int8), np.array(ev_p, np.int64)),
-        part_start_t_s=np.zeros(N),
-        part_start_x_m=start_x,
-        part_end_t_s=np.where(np.isfinite(exit_t), exit_t, duration_s),
-        part_end_x_m=end_x,
-        part_slip_time_s=slip_time,
-        part_exit_t_s=exit_t,
-    )
+        if phase[i] == Phase.STICK:
+
+            def up(tt: float, yy: F64, i: int = i) -> float:
+                return float(L[i] - rhs(tt, yy)[1])
+
+            def down(tt: float, yy: F64, i: int = i) -> float:
+                return float(L[i] + rhs(tt, yy)[1])
+
+            add(up, ("up", i))
+            add(down, ("down", i))
+        elif phase[i] > 0:
+            s = 1.0 if phase[i] == Phase.SLIP_BACKWARD else -1.0
+
+            def relvel(tt: float, yy: F64, i: int = i, s: float = s) -> float:
+                return float(s * (yy[1] - yy[3 + 2 * i]))
+
+            def leave(tt: float, yy: F64, i: int = i) -> float:
+                return float(track - (yy[2 + 2 * i] - yy[0]))
+
+            add(relvel, ("relvel", i))
+            add(leave, ("exit", i))
+    return rhs, events, tags, force_k
